@@ -1,0 +1,62 @@
+"""Error types that may escape the library.
+
+Every error caused by a user's input is an :class:`InputError` (a ``ValueError``) whose
+message names the file and, where it applies, the line, viseme or line segment. The CLI
+turns these into exit code 2; anything else is a bug or an environment failure (exit 1).
+"""
+
+from __future__ import annotations
+
+import os
+from typing import Optional, Union
+
+PathLike = Union[str, "os.PathLike[str]"]
+
+
+class InputError(ValueError):
+    """Bad user input: a file, option or value that cannot be used as given.
+
+    Parameters
+    ----------
+    message : str
+        What is wrong, in words a user can act on.
+    path : path-like, optional
+        The file the problem is in; prefixed to the message.
+    line : int, optional
+        1-based line number inside ``path``.
+
+    Examples
+    --------
+    >>> str(InputError("end before start", path="a.phn", line=3))
+    'a.phn:3: end before start'
+    """
+
+    def __init__(self, message: str, *, path: Optional[PathLike] = None, line: Optional[int] = None):
+        self.reason = message
+        self.path = os.fspath(path) if path is not None else None
+        self.line = line
+        where = ""
+        if self.path is not None:
+            where = self.path + (f":{line}" if line is not None else "") + ": "
+        elif line is not None:
+            where = f"line {line}: "
+        super().__init__(where + message)
+
+
+class BankError(InputError):
+    """A viseme bank (``bank.yaml`` or its images) is invalid."""
+
+
+class TimelineError(InputError):
+    """A phoneme or viseme timeline file cannot be read."""
+
+
+class MapError(InputError):
+    """A phoneme-to-viseme map is invalid."""
+
+
+class UnknownNameError(InputError, KeyError):
+    """A name that is not in a registry; the message lists the valid ones."""
+
+    def __str__(self) -> str:  # KeyError would otherwise quote the message
+        return ValueError.__str__(self)
