@@ -1,0 +1,72 @@
+"""Command-line interface: ``lipsync render|preprocess|check|morph|preview|timeline``.
+
+Exit codes (DESIGN.md): 0 success, 2 bad input (the message names the file and, where it
+applies, the line), 130 interrupted, 1 anything else.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from typing import Callable, List, Optional
+
+from .errors import InputError
+
+EXIT_OK, EXIT_FAILURE, EXIT_BAD_INPUT, EXIT_INTERRUPTED = 0, 1, 2, 130
+
+# Each subcommand module exposes ``add_parser(subparsers)`` that registers its parser with
+# ``set_defaults(func=run)``; ``run(args) -> int``. Listed here so --help shows them in order.
+_COMMAND_MODULES = [
+    "commands_render",
+    "commands_bank",
+    "commands_morph",
+    "timeline_cli",
+]
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse exits with 2 on usage errors already; keep that, and say which command."""
+
+
+def build_parser() -> argparse.ArgumentParser:
+    import importlib
+
+    parser = _Parser(prog="lipsync", description=__doc__.splitlines()[0])
+    from . import __version__
+
+    parser.add_argument("--version", action="version", version=f"lipsync {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    sub.required = True
+    for name in _COMMAND_MODULES:
+        try:
+            module = importlib.import_module(f".{name}", __package__)
+        except ModuleNotFoundError as exc:  # a stage not built yet must not break the others
+            if exc.name and exc.name.endswith(name):
+                continue
+            raise
+        module.add_parser(sub)
+    return parser
+
+
+def main(argv: Optional[List[str]] = None) -> int:
+    """Entry point of the ``lipsync`` console script; returns the exit code."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    func: Callable[[argparse.Namespace], int] = args.func
+    try:
+        return int(func(args) or 0)
+    except InputError as exc:
+        print(f"lipsync: error: {exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except KeyboardInterrupt:
+        print("lipsync: interrupted; no partial output was left behind", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    except BrokenPipeError:
+        return EXIT_FAILURE
+    except OSError as exc:
+        print(f"lipsync: error: {exc}", file=sys.stderr)
+        return EXIT_FAILURE
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())
