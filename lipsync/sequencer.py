@@ -1,0 +1,375 @@
+"""The sequencer: a viseme timeline becomes one :class:`FrameSpec` per output frame.
+
+Frame ``n`` shows time ``n / fps``; a timeline of duration D gives ``ceil(D * fps)`` frames.
+Each frame is a morph between two visemes at some alpha (alpha 0 shows ``from_viseme``,
+alpha 1 shows ``to_viseme``); a frame that shows one viseme exactly is
+``FrameSpec(v, v, 0.0)``.
+
+How a timeline is turned into frames (Rhubarb Lip Sync's ``src/animation`` is the model:
+a few small passes, each with one rule):
+
+1. gaps (time with no label) become the rest viseme;
+2. adjacent equal visemes merge;
+3. a pause shorter than ``MAX_HELD_PAUSE_S`` between two spoken visemes holds the viseme
+   before it; longer pauses return to rest;
+4. a non-closure segment shorter than ``MIN_SEGMENT_S`` is dropped, its time split between
+   its neighbours at its midpoint (it would only be a flicker); closures are never dropped;
+5. every boundary gets a transition of at most ``MAX_TRANSITION_S``, centred on the boundary,
+   but never starting before the source segment's hold window nor ending after the target's:
+   a segment of 200 ms or more therefore holds its viseme exactly for
+   ``2 * HOLD_HALF_WIDTH_S`` around its midpoint, and every transition reaches its target
+   no later than the target segment's midpoint;
+6. alpha inside a transition follows the timing curve (:mod:`lipsync.timing`);
+7. a closure (e.g. the closed-lips viseme for P, B, M) that no frame shows exactly gets the
+   frame nearest its midpoint forced to it, so lips always close fully even when the
+   closure is shorter than a frame.
+
+The rules, as data with the reason for each, are in :data:`RULES`.
+
+Examples
+--------
+>>> from lipsync.timeline import Segment, Timeline
+>>> tl = Timeline((Segment(0, 0.4, "X"), Segment(0.4, 0.8, "A"), Segment(0.8, 1.2, "X")), kind="viseme")
+>>> frames = sequence(tl, fps=10, rest="X")
+>>> len(frames), frames[0], frames[6]
+(12, FrameSpec(from_viseme='X', to_viseme='X', alpha=0.0), FrameSpec(from_viseme='A', to_viseme='A', alpha=0.0))
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Iterable, List, Optional, Sequence, Tuple, Union
+
+import numpy as np
+
+from .errors import InputError
+from .timeline import VISEME, Segment, Timeline
+from .timing import DEFAULT_CURVE, Curve, get_curve
+
+# --- tuning constants (seconds) -------------------------------------------------------------
+
+# Longest transition between two visemes. Lip and jaw movements between speech postures
+# take roughly 100-150 ms; longer morphs make speech look mushy, shorter ones look like cuts.
+MAX_TRANSITION_S = 0.12
+
+# Half-width of the window around a segment's midpoint that must show the viseme exactly,
+# for segments long enough (>= MAX_TRANSITION_S + 2 * HOLD_HALF_WIDTH_S = 200 ms). 40 ms is
+# one frame at 25 fps either side of the midpoint, so a 200 ms sound is seen for 3 frames.
+HOLD_HALF_WIDTH_S = 0.04
+
+# Pauses shorter than this between spoken sounds hold the previous mouth shape: speakers do
+# not relax the mouth for a stop gap or a quick breath, and dropping to rest and back within
+# a few frames looks like chattering. Equal to the "long segment" length above, so a pause
+# long enough to be shown at all is also long enough to be shown fully.
+MAX_HELD_PAUSE_S = 0.2
+
+# Non-closure segments shorter than this are dropped: lips cannot visibly reach a shape in
+# under 50 ms (about one frame at 24 fps), so showing it only adds a one-frame flicker.
+MIN_SEGMENT_S = 0.05
+
+FPS_RANGE = (1.0, 120.0)
+
+# Numerical slack when comparing alphas and times (float noise, not a tuning value).
+_EPS = 1e-9
+
+# The rules as a literal table: (name, rule, reason). Documentation and the CLI's --help
+# read it; the code above and below implements each row.
+RULES: Tuple[Tuple[str, str, str], ...] = (
+    ("gaps", "time with no label shows the rest viseme",
+     "readers leave unlabelled time as gaps; silence is the rest shape"),
+    ("merge", "adjacent equal visemes merge into one segment",
+     "a morph from a shape to itself is a still frame; merging keeps holds long"),
+    ("short-pause-hold", f"pauses < {MAX_HELD_PAUSE_S * 1000:.0f} ms between sounds hold the previous viseme",
+     "speakers do not relax the mouth in short gaps; rest-and-back looks like chattering"),
+    ("long-pause-rest", f"pauses >= {MAX_HELD_PAUSE_S * 1000:.0f} ms (and leading/trailing silence) show rest",
+     "the mouth relaxes when the speaker stops"),
+    ("drop-short", f"non-closure segments < {MIN_SEGMENT_S * 1000:.0f} ms are dropped",
+     "too short to be reached; showing them would flash for a frame"),
+    ("closures-kept", "closure visemes are never dropped and are shown exactly on at least one frame",
+     "a P, B or M without closed lips is the most visible lip-sync error"),
+    ("bounded-transition", f"transitions last at most {MAX_TRANSITION_S * 1000:.0f} ms, centred on the boundary",
+     "real articulator movements take about 100-150 ms"),
+    ("reach-by-mid", "a transition reaches its target no later than the target segment's midpoint",
+     "every sound must be seen; arriving late lags the audio"),
+    ("hold-long", f"segments >= {(MAX_TRANSITION_S + 2 * HOLD_HALF_WIDTH_S) * 1000:.0f} ms hold their viseme "
+     f"exactly for +-{HOLD_HALF_WIDTH_S * 1000:.0f} ms around the midpoint",
+     "long sounds must read as a clear shape, not a permanent blend"),
+    ("timing-curve", "alpha within a transition follows the timing curve (default sqrt-fast-middle)",
+     "slow in, slow out: real mouths accelerate and decelerate"),
+)
+
+
+@dataclass(frozen=True)
+class FrameSpec:
+    """What one output frame shows: ``from_viseme`` morphed toward ``to_viseme`` by ``alpha``.
+
+    Examples
+    --------
+    >>> FrameSpec("A", "D", 0.25).alpha
+    0.25
+    """
+
+    from_viseme: str
+    to_viseme: str
+    alpha: float
+
+    @property
+    def is_still(self) -> bool:
+        """True when the frame is exactly one viseme (no morph needed)."""
+        return self.from_viseme == self.to_viseme or self.alpha <= 0.0 or self.alpha >= 1.0
+
+    @property
+    def shown(self) -> Optional[str]:
+        """The viseme shown exactly, or None for an in-between frame."""
+        if self.from_viseme == self.to_viseme or self.alpha <= 0.0:
+            return self.from_viseme
+        if self.alpha >= 1.0:
+            return self.to_viseme
+        return None
+
+
+def frame_count(duration: float, fps: float) -> int:
+    """Number of frames for ``duration`` seconds: ``ceil(duration * fps)``.
+
+    Examples
+    --------
+    >>> frame_count(1.0, 24), frame_count(1.01, 24), frame_count(0.0, 24)
+    (24, 25, 0)
+    """
+    # Times like 1.358685 s * 25 fps carry float noise; a product within 1e-9 of an integer
+    # is that integer, so a 2.0 s timeline never gets a 49th frame at 24 fps.
+    return max(0, int(math.ceil(duration * fps - 1e-9)))
+
+
+def check_fps(fps: float) -> float:
+    """``fps`` as a float if within FPS_RANGE, else InputError."""
+    try:
+        value = float(fps)
+    except (TypeError, ValueError):
+        raise InputError(f"frame rate must be a number, not {fps!r}") from None
+    if not (FPS_RANGE[0] <= value <= FPS_RANGE[1]):
+        raise InputError(f"frame rate {fps!r} is outside {FPS_RANGE[0]:g}..{FPS_RANGE[1]:g}")
+    return value
+
+
+@dataclass(frozen=True)
+class _Seg:
+    start: float
+    end: float
+    viseme: str
+
+    @property
+    def length(self) -> float:
+        return self.end - self.start
+
+    @property
+    def mid(self) -> float:
+        return 0.5 * (self.start + self.end)
+
+
+def plan_segments(visemes: Timeline, *, rest: str, closures: Iterable[str] = (),
+                  max_held_pause: float = MAX_HELD_PAUSE_S, min_segment: float = MIN_SEGMENT_S,
+                  duration: Optional[float] = None) -> List[Tuple[float, float, str]]:
+    """Rules 1-4: the cleaned viseme track (start, end, viseme) that covers [0, duration].
+
+    Examples
+    --------
+    >>> from lipsync.timeline import Segment, Timeline
+    >>> tl = Timeline((Segment(0.2, 0.5, "A"), Segment(0.6, 0.9, "D")), kind="viseme")
+    >>> plan_segments(tl, rest="X", duration=1.0)
+    [(0.0, 0.2, 'X'), (0.2, 0.6, 'A'), (0.6, 0.9, 'D'), (0.9, 1.0, 'X')]
+    """
+    closure_set = set(closures)
+    total = visemes.duration if duration is None else float(duration)
+    # Rule 1: gaps are rest.
+    segs: List[_Seg] = []
+    t = 0.0
+    for s in visemes:
+        if s.start > total:
+            break
+        if s.start > t:
+            segs.append(_Seg(t, s.start, rest))
+        segs.append(_Seg(max(s.start, t), min(s.end, total), s.label))
+        t = min(s.end, total)
+    if t < total:
+        segs.append(_Seg(t, total, rest))
+    segs = [s for s in segs if s.length > 0]
+    segs = _merge(segs)
+    # Rule 3: short pauses between sounds hold the previous viseme.
+    held: List[_Seg] = []
+    for i, s in enumerate(segs):
+        inner = 0 < i < len(segs) - 1
+        if s.viseme == rest and inner and s.length < max_held_pause:
+            held.append(_Seg(s.start, s.end, held[-1].viseme))
+        else:
+            held.append(s)
+    segs = _merge(held)
+    # Rule 4: drop short non-closure segments, shortest first, so that a run of short ones
+    # keeps the longest of them; the freed time goes half to each neighbour.
+    while len(segs) > 1:
+        candidates = [i for i, s in enumerate(segs)
+                      if s.length < min_segment and s.viseme not in closure_set]
+        if not candidates:
+            break
+        i = min(candidates, key=lambda k: segs[k].length)
+        s = segs[i]
+        if i == 0:
+            segs[1] = _Seg(s.start, segs[1].end, segs[1].viseme)
+        elif i == len(segs) - 1:
+            segs[i - 1] = _Seg(segs[i - 1].start, s.end, segs[i - 1].viseme)
+        else:
+            segs[i - 1] = _Seg(segs[i - 1].start, s.mid, segs[i - 1].viseme)
+            segs[i + 1] = _Seg(s.mid, segs[i + 1].end, segs[i + 1].viseme)
+        del segs[i]
+        segs = _merge(segs)
+    return [(s.start, s.end, s.viseme) for s in segs]
+
+
+def _merge(segs: List[_Seg]) -> List[_Seg]:
+    # Rule 2: adjacent equal visemes merge.
+    out: List[_Seg] = []
+    for s in segs:
+        if out and out[-1].viseme == s.viseme:
+            out[-1] = _Seg(out[-1].start, s.end, s.viseme)
+        else:
+            out.append(s)
+    return out
+
+
+def plan_transitions(segments: Sequence[Tuple[float, float, str]], *,
+                     max_transition: float = MAX_TRANSITION_S,
+                     hold_half_width: float = HOLD_HALF_WIDTH_S) -> np.ndarray:
+    """Rule 5: transition windows, an array ``(len(segments) - 1, 2)`` of (t0, t1) per boundary.
+
+    Transition k goes from segment k to segment k+1. It is centred on their boundary and at
+    most ``max_transition`` long, but starts no earlier than segment k's hold window ends and
+    ends no later than segment k+1's hold window starts. The hold window of a segment is
+    ``mid ± h`` with ``h = clip(length/2 - max_transition/2, 0, hold_half_width)``: long
+    segments hold around their midpoint, short ones are touched exactly at it.
+
+    Examples
+    --------
+    >>> plan_transitions([(0, 1, "X"), (1, 1.05, "A"), (1.05, 2, "X")]).round(3).tolist()
+    [[0.94, 1.025], [1.025, 1.11]]
+    """
+    if len(segments) < 2:
+        return np.zeros((0, 2))
+    seg = np.asarray([(s, e) for s, e, _ in segments], dtype=np.float64)
+    mid = seg.mean(axis=1)
+    half = np.clip((seg[:, 1] - seg[:, 0]) / 2 - max_transition / 2, 0.0, hold_half_width)
+    hold_lo, hold_hi = mid - half, mid + half
+    boundary = seg[1:, 0]
+    t0 = np.maximum(boundary - max_transition / 2, hold_hi[:-1])
+    t1 = np.minimum(boundary + max_transition / 2, hold_lo[1:])
+    return np.stack([t0, t1], axis=1)
+
+
+def sequence(visemes: Timeline, *, fps: float, rest: str, timing: Union[str, Curve] = DEFAULT_CURVE,
+             closures: Iterable[str] = (), duration: Optional[float] = None,
+             max_transition: float = MAX_TRANSITION_S, hold_half_width: float = HOLD_HALF_WIDTH_S,
+             max_held_pause: float = MAX_HELD_PAUSE_S, min_segment: float = MIN_SEGMENT_S) -> List[FrameSpec]:
+    """Turn a viseme timeline into one FrameSpec per output frame.
+
+    Parameters
+    ----------
+    visemes : Timeline
+        A timeline of kind "viseme" (map phoneme timelines first with
+        :func:`lipsync.phonemes.map_timeline`). Gaps are silence.
+    fps : float
+        Output frame rate, 1 to 120. Frame n shows time n / fps.
+    rest : str
+        The viseme for silence (the bank's rest viseme).
+    timing : str or callable
+        Timing curve name from ``lipsync.timing.CURVES`` or a callable on [0, 1].
+    closures : iterable of str
+        Visemes that must be shown fully even when short (the closed-lips viseme).
+    duration : float, optional
+        Length of the output; default ``visemes.duration``.
+    max_transition, hold_half_width, max_held_pause, min_segment : float
+        The rule constants (seconds), overridable for experiments.
+
+    Returns
+    -------
+    list of FrameSpec
+        Exactly ``ceil(duration * fps)`` entries.
+
+    Examples
+    --------
+    >>> from lipsync.timeline import Segment, Timeline
+    >>> tl = Timeline((Segment(0, 0.3, "X"), Segment(0.3, 0.6, "D")), kind="viseme")
+    >>> [f.shown or "~" for f in sequence(tl, fps=10, rest="X")]
+    ['X', 'X', '~', '~', 'D', 'D']
+    """
+    fps = check_fps(fps)
+    if not isinstance(visemes, Timeline):
+        raise InputError("sequence() needs a Timeline")
+    if visemes.kind != VISEME:
+        raise InputError("sequence() needs a viseme timeline; map the phonemes first (map_timeline)",
+                         path=visemes.path)
+    curve = get_curve(timing)
+    closure_set = set(closures)
+    total = visemes.duration if duration is None else float(duration)
+    n_frames = frame_count(total, fps)
+    if n_frames == 0:
+        return []
+    segs = plan_segments(visemes, rest=rest, closures=closure_set, max_held_pause=max_held_pause,
+                         min_segment=min_segment, duration=total)
+    names = [v for _, _, v in segs]
+    windows = plan_transitions(segs, max_transition=max_transition, hold_half_width=hold_half_width)
+    times = np.arange(n_frames, dtype=np.float64) / fps
+
+    # Rule 6, vectorised: the last transition that started at or before each frame time;
+    # inside it the frame is a morph, after it the frame holds that transition's target.
+    k = np.searchsorted(windows[:, 0], times, side="right") - 1 if len(windows) else np.full(n_frames, -1)
+    in_transition = np.zeros(n_frames, dtype=bool)
+    alpha = np.zeros(n_frames)
+    valid = k >= 0
+    if len(windows):
+        kk = np.clip(k, 0, None)
+        t0, t1 = windows[kk, 0], windows[kk, 1]
+        span = np.maximum(t1 - t0, _EPS)
+        in_transition = valid & (times < t1)
+        u = np.clip((times - t0) / span, 0.0, 1.0)
+        alpha = np.where(in_transition, np.asarray(curve(u), dtype=np.float64), 0.0)
+    held_index = np.where(valid, k + 1, 0)
+
+    specs: List[FrameSpec] = []
+    for n in range(n_frames):
+        if in_transition[n]:
+            a = float(alpha[n])
+            src, dst = names[k[n]], names[k[n] + 1]
+            if a <= _EPS:
+                specs.append(FrameSpec(src, src, 0.0))
+            elif a >= 1.0 - _EPS:
+                specs.append(FrameSpec(dst, dst, 0.0))
+            else:
+                specs.append(FrameSpec(src, dst, a))
+        else:
+            v = names[held_index[n]]
+            specs.append(FrameSpec(v, v, 0.0))
+
+    # Rule 7: every closure is shown exactly on at least one frame.
+    for i, (s, e, v) in enumerate(segs):
+        if v not in closure_set:
+            continue
+        first = int(math.ceil(s * fps - _EPS))
+        last = int(math.ceil(e * fps - _EPS)) - 1
+        if any(specs[n].shown == v for n in range(max(first, 0), min(last, n_frames - 1) + 1)):
+            continue
+        nearest = min(max(int(round(0.5 * (s + e) * fps)), 0), n_frames - 1)
+        specs[nearest] = FrameSpec(v, v, 0.0)
+    return specs
+
+
+def describe(specs: Sequence[FrameSpec], fps: float) -> str:
+    """A frame schedule as text, one line per frame: number, time, from, to, alpha.
+
+    Examples
+    --------
+    >>> print(describe([FrameSpec("X", "X", 0.0), FrameSpec("X", "A", 0.5)], 10))
+    0	0.000	X	X	0.000
+    1	0.100	X	A	0.500
+    """
+    return "\n".join(f"{n}\t{n / fps:.3f}\t{f.from_viseme}\t{f.to_viseme}\t{f.alpha:.3f}"
+                     for n, f in enumerate(specs))
