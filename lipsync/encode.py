@@ -78,6 +78,9 @@ ENCODERS: "Registry[type]" = Registry("output format")
 # its context, short enough to read in a terminal.
 STDERR_TAIL_CHARS = 2000
 
+# Seconds to let a failing ffmpeg exit on its own (so its stderr is complete) before killing it.
+FFMPEG_EXIT_WAIT = 5.0
+
 # Audio bitrate for the AAC track: transparent for speech and music at 48 kHz stereo.
 AAC_BITRATE = "192k"
 
@@ -420,8 +423,12 @@ class Mp4Writer(Writer):
         proc = self._proc
         code = None
         if proc is not None:
+            if exc is not None and not isinstance(exc, BrokenPipeError):
+                # The failure is on our side and ffmpeg is still waiting for frames.
+                proc.kill()
             try:
-                code = proc.wait(timeout=5)
+                # A broken pipe means ffmpeg is exiting: let it finish writing its error.
+                code = proc.wait(timeout=FFMPEG_EXIT_WAIT)
             except subprocess.TimeoutExpired:
                 proc.kill()
                 code = proc.wait()
