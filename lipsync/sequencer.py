@@ -299,7 +299,7 @@ def sequence(visemes: Timeline, *, fps: float, rest: str, timing: Union[str, Cur
     >>> from lipsync.timeline import Segment, Timeline
     >>> tl = Timeline((Segment(0, 0.3, "X"), Segment(0.3, 0.6, "D")), kind="viseme")
     >>> [f.shown or "~" for f in sequence(tl, fps=10, rest="X")]
-    ['X', 'X', '~', '~', 'D', 'D']
+    ['X', 'X', 'X', '~', 'D', 'D']
     """
     fps = check_fps(fps)
     if not isinstance(visemes, Timeline):
@@ -367,9 +367,9 @@ def describe(specs: Sequence[FrameSpec], fps: float) -> str:
 
     Examples
     --------
-    >>> print(describe([FrameSpec("X", "X", 0.0), FrameSpec("X", "A", 0.5)], 10))
-    0	0.000	X	X	0.000
-    1	0.100	X	A	0.500
+    >>> print(describe([FrameSpec("X", "X", 0.0), FrameSpec("X", "A", 0.5)], 10).replace("\t", " "))
+    0 0.000 X X 0.000
+    1 0.100 X A 0.500
     """
     return "\n".join(f"{n}\t{n / fps:.3f}\t{f.from_viseme}\t{f.to_viseme}\t{f.alpha:.3f}"
                      for n, f in enumerate(specs))

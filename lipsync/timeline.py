@@ -214,8 +214,8 @@ def read_timeline(path: PathLike, format: Optional[str] = None, *, tier: Optiona
     >>> p = os.path.join(tempfile.mkdtemp(), "cues.txt")
     >>> _ = open(p, "w").write("0.00\\tX\\n0.12\\tB\\n0.40\\tX\\n")
     >>> tl = read_timeline(p, "rhubarb-tsv")
-    >>> tl.kind, tl.labels()
-    ('viseme', ['X', 'B', 'X'])
+    >>> tl.kind, tl.labels(), tl.duration
+    ('viseme', ['X', 'B'], 0.4)
     """
     name = os.fspath(path)
     if format is not None:

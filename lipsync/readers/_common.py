@@ -148,3 +148,59 @@ def sniff_text(head: bytes) -> str:
         # Cut to whole code units so a truncated head still decodes.
         return head[: len(head) // 2 * 2].decode("utf-16", errors="ignore")
     return head.decode("utf-8", errors="ignore")
+
+
+def load_json(path: str, text: str):
+    """``json.loads`` with JSON syntax errors turned into TimelineError at their line."""
+    import json
+
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise TimelineError(f"not valid JSON ({exc.msg})", path=path, line=exc.lineno) from None
+    except RecursionError:
+        raise TimelineError("JSON nested too deeply", path=path, line=1) from None
+
+
+def json_array_lines(text: str, key: str) -> List[int]:
+    """1-based line of each element of the first array stored under ``"key"`` in ``text``.
+
+    json does not report positions of values, so the array is found by its key and each
+    element is decoded in place to learn where the next one starts. Returns [] if the array
+    cannot be located (callers then report no line).
+    """
+    import json
+
+    m = re.search(r'"' + re.escape(key) + r'"\s*:\s*\[', text)
+    if not m:
+        return []
+    decoder = json.JSONDecoder()
+    pos, lines = m.end(), []
+    ws = re.compile(r"[\s,]*")
+    try:
+        while True:
+            pos = ws.match(text, pos).end()
+            if pos >= len(text) or text[pos] == "]":
+                return lines
+            lines.append(text.count("\n", 0, pos) + 1)
+            _, pos = decoder.raw_decode(text, pos)
+    except (ValueError, RecursionError):
+        return []
+
+
+def line_of(lines: List[int], index: int) -> Optional[int]:
+    return lines[index] if 0 <= index < len(lines) else None
+
+
+def json_time(value, path: str, line: Optional[int], what: str) -> float:
+    """A JSON number (or numeric string) as a float, else TimelineError."""
+    if isinstance(value, bool) or value is None:
+        raise TimelineError(f"{what} {value!r} is not a number", path=path, line=line)
+    if isinstance(value, (int, float)):
+        v = float(value)
+        if not math.isfinite(v):
+            raise TimelineError(f"{what} {value!r} is not a finite number", path=path, line=line)
+        return v
+    if isinstance(value, str):
+        return parse_number(value, path, line, what)
+    raise TimelineError(f"{what} {value!r} is not a number", path=path, line=line)
