@@ -367,9 +367,9 @@ def describe(specs: Sequence[FrameSpec], fps: float) -> str:
 
     Examples
     --------
-    >>> print(describe([FrameSpec("X", "X", 0.0), FrameSpec("X", "A", 0.5)], 10).replace("\t", " "))
-    0 0.000 X X 0.000
-    1 0.100 X A 0.500
+    >>> text = describe([FrameSpec("X", "X", 0.0), FrameSpec("X", "A", 0.5)], 10)
+    >>> [line.split() for line in text.splitlines()]
+    [['0', '0.000', 'X', 'X', '0.000'], ['1', '0.100', 'X', 'A', '0.500']]
     """
     return "\n".join(f"{n}\t{n / fps:.3f}\t{f.from_viseme}\t{f.to_viseme}\t{f.alpha:.3f}"
                      for n, f in enumerate(specs))
