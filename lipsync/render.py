@@ -1,0 +1,341 @@
+"""Frames between two visemes (paper 3.4, with DESIGN.md's erratum 1 fixed).
+
+At ``alpha`` the first image moves by ``alpha * forward_flow`` and the second by
+``(1 - alpha) * backward_flow``; the frame is ``(1 - alpha) * A' + alpha * B'``. So
+alpha = 0 shows A and alpha = 1 shows B exactly.
+
+Methods (registry :data:`METHODS`):
+
+``flow`` (default)
+    Gather with ``cv2.remap``. Output pixel Y takes A at the X that moves onto it,
+    ``X + alpha F(X) = Y``, found by the fixed-point iteration ``X <- Y - alpha F(X)``
+    (:data:`FLOW_ITERATIONS` steps), and likewise B with ``(1 - alpha)`` and the backward
+    flow. Only the box where the flows are non-zero or the images differ is rendered;
+    the rest of the frame is the common background, copied once per pair.
+``splat``
+    The paper's forward mapping: every pixel is scattered to ``round(X + alpha F(X))``,
+    holes (where the image expands) are inpainted from their surroundings.
+``beier-neely``
+    The classic morph: interpolate the lines, warp both images to them with a full
+    Beier–Neely warp every frame. The quality reference and the speed baseline.
+``dissolve``
+    A cross-fade: the baseline any morph must beat.
+"""
+
+from __future__ import annotations
+
+from collections import OrderedDict
+from dataclasses import dataclass
+from typing import Dict, Optional, Tuple
+
+import cv2
+import numpy as np
+
+from .bank import Bank
+from .errors import InputError
+from .flows import pair_flows
+from .normalise import NormalisedBank, normalise
+from .registry import Registry
+from .store import Crop, FlowStore, StoredField
+from .warp import beier_neely_map, identity_grid
+
+#: Fixed-point steps inverting ``Y = X + alpha F(X)``. The error shrinks by about
+#: ``alpha |grad F|`` per step (< 0.3 for lip motion), so after 3 steps it is below
+#: 0.03 px on the default subject (tests/test_render.py measures it against 50 steps).
+FLOW_ITERATIONS = 3
+#: Extra pixels around the moving region: bilinear taps reach one pixel out.
+ROI_MARGIN = 2
+#: Splat holes are filled by Telea inpainting with this radius (px): holes from
+#: expansion are one or two pixels wide, so a small radius keeps edges sharp.
+INPAINT_RADIUS = 2
+#: Cached per-pair states (ROI-sized arrays); 9 visemes need at most 72.
+MAX_PAIR_STATES = 96
+
+METHODS: Registry[str] = Registry("morph method")
+for _name, _why in [("flow", "interpolate the cached flows (fast, default)"),
+                    ("splat", "paper's forward splat with hole filling"),
+                    ("beier-neely", "full Beier-Neely warp every frame (reference, slow)"),
+                    ("dissolve", "cross-fade only (baseline)")]:
+    METHODS.register(_name, _why, aliases=[_name.replace("-", "_")] if "-" in _name else [])
+
+
+@dataclass
+class _Pair:
+    """Everything a frame of the ordered pair (a, b) needs, allocated once."""
+
+    a: str
+    b: str
+    roi: Crop
+    img_a: np.ndarray          # ROI views of the normalised images
+    img_b: np.ndarray
+    fwd: np.ndarray            # float32 (h, w, 2) flows inside the ROI
+    bwd: np.ndarray
+    grid: np.ndarray           # ROI-relative identity grid
+    map_a: np.ndarray
+    map_b: np.ndarray
+    sampled: np.ndarray
+    buf_a: np.ndarray
+    buf_b: np.ndarray
+
+
+def _union(boxes, shape, margin) -> Crop:
+    boxes = [b for b in boxes if not b.empty]
+    if not boxes:
+        return Crop(0, 0, 0, 0)
+    h, w = shape
+    return Crop(max(0, min(b.y0 for b in boxes) - margin), min(h, max(b.y1 for b in boxes) + margin),
+                max(0, min(b.x0 for b in boxes) - margin), min(w, max(b.x1 for b in boxes) + margin))
+
+
+def _difference_box(a: np.ndarray, b: np.ndarray) -> Crop:
+    diff = np.any(a != b, axis=2)
+    rows = np.flatnonzero(diff.any(axis=1))
+    if rows.size == 0:
+        return Crop(0, 0, 0, 0)
+    cols = np.flatnonzero(diff.any(axis=0))
+    return Crop(int(rows[0]), int(rows[-1]) + 1, int(cols[0]), int(cols[-1]) + 1)
+
+
+class Renderer:
+    """Renders in-between frames of a bank, reusing buffers and flows across frames.
+
+    Parameters
+    ----------
+    bank : Bank or NormalisedBank
+        The subject. A plain bank is normalised first.
+    method : str
+        One of :data:`METHODS`: ``flow``, ``splat``, ``beier-neely``, ``dissolve``.
+    store : FlowStore, optional
+        Where flows are read from (and written to, when a pair is missing); default: the
+        bank's store. Missing pairs are computed on first use.
+
+    Examples
+    --------
+    >>> from lipsync._data import default_bank_dir
+    >>> r = Renderer(Bank.load(default_bank_dir()))
+    >>> frame = r.render("A", "D", 0.5)
+    >>> frame.shape, frame.dtype
+    ((512, 512, 3), dtype('uint8'))
+    """
+
+    def __init__(self, bank, *, method: str = "flow", store: Optional[FlowStore] = None):
+        METHODS.get(method)  # raises, listing the valid names, if unknown
+        self.method = _canonical(method)
+        self.nb: NormalisedBank = bank if isinstance(bank, NormalisedBank) else None  # type: ignore
+        self.bank: Bank = bank.bank if isinstance(bank, NormalisedBank) else bank
+        self.store = store if store is not None else FlowStore.for_bank(self.bank)
+        if self.nb is None:
+            self.nb = normalise(self.bank, cache=self.store)
+        h, w = self.nb.shape
+        self.shape = (h, w)
+        self._frame = np.empty((h, w, 3), np.uint8)
+        self._frame_pair: Optional[Tuple[str, str]] = None
+        self._pairs: "OrderedDict[Tuple[str, str], _Pair]" = OrderedDict()
+        self._full_a = np.empty((h, w, 3), np.uint8)
+        self._full_b = np.empty((h, w, 3), np.uint8)
+        self._grid: Optional[np.ndarray] = None
+
+    # ------------------------------------------------------------------ public
+    def render(self, from_viseme: str, to_viseme: str, alpha: float, *, out: Optional[np.ndarray] = None
+               ) -> np.ndarray:
+        """The frame at ``alpha`` between two visemes, RGB ``uint8`` ``(H, W, 3)``.
+
+        Without ``out`` the returned array is the renderer's own buffer, overwritten by the
+        next call: copy it to keep it.
+        """
+        self._check(from_viseme, to_viseme, alpha)
+        frame = self._frame if out is None else out
+        imgs = self.nb.images
+        if from_viseme == to_viseme or alpha <= 0.0:
+            np.copyto(frame, imgs[from_viseme])
+            self._frame_pair = None
+            return frame
+        if alpha >= 1.0:
+            np.copyto(frame, imgs[to_viseme])
+            self._frame_pair = None
+            return frame
+        if self.method == "dissolve":
+            cv2.addWeighted(imgs[from_viseme], 1.0 - alpha, imgs[to_viseme], alpha, 0.0, dst=frame)
+            self._frame_pair = None
+            return frame
+        if self.method == "beier-neely":
+            wa, wb = self._beier_neely_parts(from_viseme, to_viseme, alpha)
+            cv2.addWeighted(wa, 1.0 - alpha, wb, alpha, 0.0, dst=frame)
+            self._frame_pair = None
+            return frame
+        pair = self._pair(from_viseme, to_viseme)
+        if out is not None or self._frame_pair != (from_viseme, to_viseme):
+            # Outside the ROI both images are equal and nothing moves.
+            np.copyto(frame, imgs[from_viseme])
+            if out is None:
+                self._frame_pair = (from_viseme, to_viseme)
+        if pair.roi.empty:
+            return frame
+        if self.method == "flow":
+            self._flow_parts(pair, alpha)
+        else:
+            self._splat_parts(pair, alpha)
+        r = pair.roi
+        cv2.addWeighted(pair.buf_a, 1.0 - alpha, pair.buf_b, alpha, 0.0, dst=frame[r.y0:r.y1, r.x0:r.x1])
+        return frame
+
+    def parts(self, from_viseme: str, to_viseme: str, alpha: float) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(forward warp of A, backward warp of B, blended frame)`` at ``alpha``, as new arrays.
+
+        The rows of the paper's figures 8 and 9 (used by ``lipsync morph --frames``).
+        """
+        self._check(from_viseme, to_viseme, alpha)
+        imgs = self.nb.images
+        a, b = imgs[from_viseme], imgs[to_viseme]
+        if self.method == "dissolve" or from_viseme == to_viseme:
+            wa, wb = a.copy(), b.copy()
+        elif self.method == "beier-neely":
+            wa, wb = (x.copy() for x in self._beier_neely_parts(from_viseme, to_viseme, alpha))
+        else:
+            pair = self._pair(from_viseme, to_viseme)
+            wa, wb = a.copy(), b.copy()
+            if not pair.roi.empty:
+                (self._flow_parts if self.method == "flow" else self._splat_parts)(pair, alpha)
+                r = pair.roi
+                wa[r.y0:r.y1, r.x0:r.x1] = pair.buf_a
+                wb[r.y0:r.y1, r.x0:r.x1] = pair.buf_b
+        blend = cv2.addWeighted(wa, 1.0 - alpha, wb, alpha, 0.0)
+        return wa, wb, blend
+
+    # ------------------------------------------------------------------ checks
+    def _check(self, a: str, b: str, alpha: float) -> None:
+        for v in (a, b):
+            if v not in self.nb.images:
+                raise InputError(f"unknown viseme {v!r}; the bank {self.bank.name!r} has "
+                                 f"{', '.join(self.bank.names)}", path=self.bank.yaml_path)
+        if not (0.0 <= alpha <= 1.0) or alpha != alpha:
+            raise InputError(f"alpha must be between 0 and 1, got {alpha}")
+
+    # ------------------------------------------------------------------ pair state
+    def _flows(self, a: str, b: str) -> Tuple[StoredField, StoredField]:
+        got = self.store.get_pair(self.bank, a, b)
+        if got is not None:
+            return got
+        nb = self.nb
+        i, j = self.bank.names.index(a), self.bank.names.index(b)
+        first, second = (a, b) if i <= j else (b, a)
+        fwd, bwd = pair_flows(self.shape, nb.lines[first], nb.lines[second], self.bank.warp,
+                              line_names=self.bank.line_names, axis=nb.axis)
+        key = self.store.pair_key(self.bank, first, second, nb.axis)
+        try:
+            self.store.put_pair(key, fwd, bwd, axis=nb.axis, names=(first, second))
+            got = self.store.load_pair(key, self.shape)
+        except OSError:
+            got = None  # unwritable store: use the fields directly
+        if got is None:
+            full = Crop(0, self.shape[0], 0, self.shape[1])
+            got = (StoredField(self.shape, full, fwd), StoredField(self.shape, full, bwd))
+        return got if (first, second) == (a, b) else (got[1], got[0])
+
+    def _pair(self, a: str, b: str) -> _Pair:
+        key = (a, b)
+        pair = self._pairs.get(key)
+        if pair is not None:
+            self._pairs.move_to_end(key)
+            return pair
+        fwd, bwd = self._flows(a, b)
+        ia, ib = self.nb.images[a], self.nb.images[b]
+        roi = _union([fwd.crop, bwd.crop, _difference_box(ia, ib)], self.shape, ROI_MARGIN)
+        h, w = roi.y1 - roi.y0, roi.x1 - roi.x0
+        sl = (slice(roi.y0, roi.y1), slice(roi.x0, roi.x1))
+        fwd_full, bwd_full = np.zeros((h, w, 2), np.float32), np.zeros((h, w, 2), np.float32)
+        for src, dst in ((fwd, fwd_full), (bwd, bwd_full)):
+            c = src.crop
+            if not c.empty:
+                dst[c.y0 - roi.y0:c.y1 - roi.y0, c.x0 - roi.x0:c.x1 - roi.x0] = src.data
+        pair = _Pair(a=a, b=b, roi=roi, img_a=ia[sl], img_b=ib[sl], fwd=fwd_full, bwd=bwd_full,
+                     grid=identity_grid((h, w)), map_a=np.empty((h, w, 2), np.float32),
+                     map_b=np.empty((h, w, 2), np.float32), sampled=np.empty((h, w, 2), np.float32),
+                     buf_a=np.empty((h, w, 3), np.uint8), buf_b=np.empty((h, w, 3), np.uint8))
+        self._pairs[key] = pair
+        if len(self._pairs) > MAX_PAIR_STATES:
+            self._pairs.popitem(last=False)
+        return pair
+
+    # ------------------------------------------------------------------ methods
+    def _gather(self, image: np.ndarray, flow: np.ndarray, t: float, grid: np.ndarray, m: np.ndarray,
+                sampled: np.ndarray, out: np.ndarray) -> None:
+        """``out[Y] = image[X]`` with ``X + t*flow(X) = Y`` (fixed-point inversion)."""
+        cv2.addWeighted(flow, -t, grid, 1.0, 0.0, dst=m)
+        for _ in range(FLOW_ITERATIONS - 1):
+            cv2.remap(flow, m, None, cv2.INTER_LINEAR, dst=sampled, borderMode=cv2.BORDER_REPLICATE)
+            cv2.addWeighted(sampled, -t, grid, 1.0, 0.0, dst=m)
+        # Fixed-point maps remap ~1.7x faster than float maps; 1/32 px resolution is plenty.
+        m1, m2 = cv2.convertMaps(m, None, cv2.CV_16SC2)
+        cv2.remap(image, m1, m2, cv2.INTER_LINEAR, dst=out, borderMode=cv2.BORDER_REPLICATE)
+
+    def _flow_parts(self, p: _Pair, alpha: float) -> None:
+        self._gather(p.img_a, p.fwd, alpha, p.grid, p.map_a, p.sampled, p.buf_a)
+        self._gather(p.img_b, p.bwd, 1.0 - alpha, p.grid, p.map_b, p.sampled, p.buf_b)
+
+    def _splat_parts(self, p: _Pair, alpha: float) -> None:
+        _splat(p.img_a, p.fwd, alpha, p.grid, p.buf_a)
+        _splat(p.img_b, p.bwd, 1.0 - alpha, p.grid, p.buf_b)
+
+    def _beier_neely_parts(self, a: str, b: str, alpha: float) -> Tuple[np.ndarray, np.ndarray]:
+        nb, w = self.nb, self.bank.warp
+        lines = (1.0 - alpha) * nb.lines[a] + alpha * nb.lines[b]
+        for src, out in ((a, self._full_a), (b, self._full_b)):
+            m = beier_neely_map(self.shape, dst_lines=lines, src_lines=nb.lines[src], a=w.a, b=w.b, p=w.p)
+            cv2.remap(nb.images[src], m, None, cv2.INTER_LINEAR, dst=out, borderMode=cv2.BORDER_REPLICATE)
+        return self._full_a, self._full_b
+
+
+def _canonical(method: str) -> str:
+    return method.lower().replace("_", "-")
+
+
+def _splat(image: np.ndarray, flow: np.ndarray, t: float, grid: np.ndarray, out: np.ndarray) -> None:
+    """Paper 3.4 forward mapping: scatter to ``round(X + t*flow(X))``, then fill holes."""
+    h, w = out.shape[:2]
+    tx = np.rint(grid[..., 0] + t * flow[..., 0]).astype(np.int32)
+    ty = np.rint(grid[..., 1] + t * flow[..., 1]).astype(np.int32)
+    ok = (tx >= 0) & (tx < w) & (ty >= 0) & (ty < h)
+    idx = (ty * w + tx)[ok]
+    flat = out.reshape(-1, 3)
+    flat[idx] = image.reshape(-1, 3)[ok.ravel()]
+    filled = np.zeros(h * w, np.uint8)
+    filled[idx] = 1
+    holes = (filled == 0).reshape(h, w).view(np.uint8)
+    if holes.any():
+        cv2.inpaint(out, holes, INPAINT_RADIUS, cv2.INPAINT_TELEA, dst=out)
+
+
+_RENDERERS: Dict[Tuple[int, str], Renderer] = {}
+
+
+def morph(bank, from_name: str, to_name: str, alpha: float, method: str = "flow") -> np.ndarray:
+    """One in-between frame: RGB ``uint8`` ``(H, W, 3)``, a new array.
+
+    Parameters
+    ----------
+    bank : Bank
+        A loaded bank (flows are read from, or computed into, its store).
+    from_name, to_name : str
+        Visemes; alpha = 0 gives ``from_name``'s image, alpha = 1 ``to_name``'s.
+    alpha : float
+        Position in [0, 1].
+    method : str
+        ``flow`` (default), ``splat``, ``beier-neely`` or ``dissolve``.
+
+    Examples
+    --------
+    >>> from lipsync import Bank
+    >>> from lipsync._data import default_bank_dir
+    >>> bank = Bank.load(default_bank_dir())
+    >>> bool((morph(bank, "A", "D", 0.0) == bank.images["A"]).all())
+    True
+    """
+    key = (id(bank), _canonical(method))
+    r = _RENDERERS.get(key)
+    if r is None or r.bank is not bank:
+        r = Renderer(bank, method=method)
+        _RENDERERS.clear()  # one bank at a time: renderers hold image-sized buffers
+        _RENDERERS[key] = r
+    return r.render(from_name, to_name, alpha).copy()
+
