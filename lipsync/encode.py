@@ -57,7 +57,6 @@ import errno
 import os
 import re
 import shutil
-import signal
 import subprocess
 import sys
 import tempfile
@@ -143,8 +142,6 @@ def _remove(path: str) -> None:
             shutil.rmtree(path, ignore_errors=True)
         else:
             os.remove(path)
-    except FileNotFoundError:
-        pass
     except OSError:
         pass
 
@@ -153,10 +150,11 @@ def _disk_full(exc: BaseException) -> bool:
     return isinstance(exc, OSError) and exc.errno == errno.ENOSPC
 
 
-def _tail(path_or_file) -> str:
+def _tail(stream) -> str:
+    """The last STDERR_TAIL_CHARS characters of a captured stderr file."""
     try:
-        path_or_file.seek(0)
-        data = path_or_file.read()
+        stream.seek(0)
+        data = stream.read()
     except (OSError, ValueError):
         return ""
     text = data.decode("utf-8", "replace") if isinstance(data, bytes) else data
@@ -385,8 +383,9 @@ class Mp4Writer(Writer):
             raise IsADirectoryError(errno.EISDIR, f"cannot write {self.out}: a folder of that name exists", self.out)
         self._reserve(self.partial)
         # With audio the video goes to an intermediate file and is muxed once its length is
-        # known; mkv takes any stream without needing a seekable index pass.
-        self.video_path = self._temp_name("video", ".mkv") if self.audio else self.partial
+        # known. mp4, not mkv: matroska rounds timestamps to 1 ms, which would make 60 or
+        # 29.97 fps video slightly variable-rate after the stream copy.
+        self.video_path = self._temp_name("video", ".mp4") if self.audio else self.partial
         if self.audio:
             self._reserve(self.video_path)
         width, height = self.size
@@ -402,7 +401,7 @@ class Mp4Writer(Writer):
             "-c:v", "libx264", "-crf", str(self.crf), "-preset", self.preset,
         ]
         if self.audio:
-            cmd += ["-f", "matroska", self.video_path]
+            cmd += ["-f", "mp4", self.video_path]
         else:
             if self.faststart:
                 cmd += ["-movflags", "+faststart"]

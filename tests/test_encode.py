@@ -450,3 +450,77 @@ def test_docstring_examples_run():
 
     result = doctest.testmod(encode, optionflags=doctest.ELLIPSIS)
     assert result.attempted >= 7 and result.failed == 0
+
+
+def test_high_frame_rate_with_audio_keeps_a_constant_rate(tmp_path):
+    # 60 fps does not divide a millisecond clock: an intermediate container with 1 ms
+    # timestamps would turn this into 60.08 fps variable-rate video.
+    wav = write_wav(tmp_path / "a.wav", 0.3)
+    out = tmp_path / "fast.mp4"
+    _, frames = colour_frames(31)
+    with open_writer(out, fps=60, size=(W, H), audio=wav, quiet=True) as w:
+        for f in frames:
+            w.write(f)
+    info = probe(out)
+    assert info["fps"] == 60.0 and info["n_frames"] == 31
+    assert abs(info["audio_duration"] - 31 / 60) <= 1 / 60
+
+
+CHILD = """
+import sys, time, numpy as np
+from lipsync.encode import open_writer
+with open_writer(sys.argv[1], fps=25, size=(64, 48), audio=sys.argv[2], quiet=True) as w:
+    w.write(np.zeros((48, 64, 3), np.uint8))
+    print("started", flush=True)
+    while True:
+        w.write(np.zeros((48, 64, 3), np.uint8))
+        time.sleep(0.01)
+"""
+
+
+@pytest.mark.skipif(os.name != "posix", reason="process groups and SIGINT are POSIX")
+def test_ctrl_c_to_the_process_group(tmp_path):
+    # A terminal's Ctrl-C signals the whole foreground group; ffmpeg must not finalise a
+    # file of its own, and Python's cleanup must leave nothing behind.
+    import sys
+
+    script = tmp_path / "child.py"
+    script.write_text(CHILD)
+    out_dir = tmp_path / "out"
+    out_dir.mkdir()
+    wav = write_wav(tmp_path / "a.wav", 0.5)
+    proc = subprocess.Popen([sys.executable, str(script), str(out_dir / "o.mp4"), str(wav)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True)
+    try:
+        assert proc.stdout.readline().strip() == b"started"
+        os.killpg(proc.pid, signal.SIGINT)
+        assert proc.wait(timeout=30) != 0
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert b"KeyboardInterrupt" in proc.stderr.read()
+    assert leftovers(out_dir) == []
+
+
+def test_permission_denied_is_reported_even_when_running_as_root(tmp_path, monkeypatch):
+    # root ignores folder permissions, so deny creation of anything under this folder the
+    # way a read-only mount would, whoever runs the tests.
+    ro = tmp_path / "ro"
+    ro.mkdir()
+    real_open, real_mkdir = os.open, os.mkdir
+
+    def deny(real):
+        def wrapped(path, *args, **kwargs):
+            if os.fspath(path).startswith(str(ro)):
+                raise PermissionError(errno.EACCES, os.strerror(errno.EACCES), os.fspath(path))
+            return real(path, *args, **kwargs)
+        return wrapped
+
+    monkeypatch.setattr(os, "open", deny(real_open))
+    monkeypatch.setattr(os, "mkdir", deny(real_mkdir))
+    for out, fmt in ((ro / "clip.mp4", None), (ro / "seq", "png")):
+        with pytest.raises(PermissionError) as err:
+            open_writer(out, fps=FPS, size=(W, H), format=fmt, quiet=True)
+        assert "not writable" in str(err.value) and str(ro) in str(err.value)
+    monkeypatch.undo()
+    assert os.listdir(ro) == []
