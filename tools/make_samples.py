@@ -311,7 +311,7 @@ class Word:
 
 
 def split_mark(ph: str) -> tuple[str, str]:
-    """'ˈoU'-style espeak phoneme -> (stress mark or '', mnemonic)."""
+    """"'oU" -> ("'", "oU"): an espeak phoneme split into stress mark ('' if none) and mnemonic."""
     mark = ""
     while ph and ph[0] in "',":
         mark = ph[0] if not mark else mark
@@ -344,7 +344,7 @@ def to_arpabet(mnemonic: str, stress: str) -> list[str]:
     for i, p in enumerate(phones):
         if p in ARPABET_VOWELS:
             # the second vowel of a split entry (AY ER of "fire") is unstressed
-            out.append(p + (stress or "1" if i == 0 else "0"))
+            out.append(p + ((stress or "1") if i == 0 else "0"))
         else:
             out.append(p)
     return out
