@@ -39,6 +39,9 @@ Errors
     * ffmpeg failing: :class:`EncodeError` with the tail of ffmpeg's stderr and the path;
     * a full disk: ``OSError`` with ``errno.ENOSPC`` and a message saying what happened.
 
+    Only a SIGKILL of the Python process itself can leave a temporary file behind
+    (``.OUT.partial-<pid>.mp4``, a hidden name beside ``OUT``); ``OUT`` is never touched.
+
 Examples
 --------
 >>> import numpy as np, tempfile, os
@@ -69,7 +72,7 @@ import numpy as np
 from .errors import InputError, PathLike, UnknownNameError
 from .registry import Registry
 
-__all__ = ["ENCODERS", "EncodeError", "Writer", "Mp4Writer", "PngWriter", "open_writer", "probe"]
+__all__ = ["ENCODERS", "EncodeError", "Writer", "Mp4Writer", "PngWriter", "open_writer", "format_for", "probe"]
 
 ENCODERS: "Registry[type]" = Registry("output format")
 
