@@ -1,0 +1,117 @@
+"""Flow store: reuse, invalidation of only the affected pairs, damaged entries as misses."""
+
+import shutil
+import subprocess
+import sys
+
+import cv2
+import numpy as np
+import pytest
+
+from lipsync.bank import Bank
+from lipsync.flows import pair_flows
+from lipsync.normalise import normalise
+from lipsync.preprocess import all_pairs, preprocess
+from lipsync.store import CROP_EPS, FlowStore, StoreWarning
+
+
+@pytest.fixture()
+def bank_dir(synthetic_bank_dir, tmp_path):
+    d = tmp_path / "bank"
+    shutil.copytree(synthetic_bank_dir, d)
+    return d
+
+
+def run_cli(*args):
+    return subprocess.run([sys.executable, "-m", "lipsync", *args], capture_output=True, text=True)
+
+
+def test_preprocess_twice_then_change_one_image(bank_dir):
+    first = run_cli("preprocess", str(bank_dir), "--jobs", "2", "--quiet")
+    assert first.returncode == 0, first.stderr
+    assert "6 pairs: 6 computed, 0 reused" in first.stdout
+    second = run_cli("preprocess", str(bank_dir), "--quiet")
+    assert "6 pairs: 0 computed, 6 reused" in second.stdout
+    # Change one viseme's image: only the 3 pairs involving it are recomputed.
+    img = cv2.imread(str(bank_dir / "O.png"))
+    img[0, 0] = 255 - img[0, 0]
+    cv2.imwrite(str(bank_dir / "O.png"), img)
+    third = run_cli("preprocess", str(bank_dir), "--quiet")
+    assert "6 pairs: 3 computed, 3 reused" in third.stdout, third.stdout
+
+
+def test_truncated_entry_is_recomputed_with_a_warning(bank_dir):
+    bank = Bank.load(bank_dir)
+    store = FlowStore.for_bank(bank)
+    preprocess(bank, store=store, jobs=1, quiet=True)
+    entries = sorted((store.root / "flows").glob("*.npz"))
+    assert len(entries) == 6
+    victim = entries[2]
+    data = victim.read_bytes()
+    victim.write_bytes(data[: len(data) // 2])
+    result = run_cli("preprocess", str(bank_dir), "--quiet")
+    assert result.returncode == 0
+    assert "1 computed, 5 reused" in result.stdout
+    assert "unusable flow store entry" in result.stderr and victim.name in result.stderr
+    assert victim.read_bytes() == data  # recomputed to the same bytes
+
+
+@pytest.mark.parametrize("damage", ["flip", "garbage", "empty"])
+def test_damaged_entries_are_misses_not_crashes(bank_dir, damage):
+    bank = Bank.load(bank_dir)
+    store = FlowStore(bank_dir / "store")
+    preprocess(bank, store=store, jobs=1, quiet=True)
+    key = store.pair_key(bank, "X", "O", normalise(bank).axis)
+    path = store.pair_path(key)
+    data = bytearray(path.read_bytes())
+    if damage == "flip":
+        data[len(data) // 2] ^= 0x40
+    elif damage == "garbage":
+        data = bytearray(b"\x00\x01junk" * 10)
+    else:
+        data = bytearray()
+    path.write_bytes(bytes(data))
+    with pytest.warns(StoreWarning):
+        assert store.get_pair(bank, "X", "O") is None
+    report = preprocess(bank, store=store, jobs=1, quiet=True)
+    assert report.computed == 1
+
+
+def test_stored_fields_match_computed_fields(bank_dir):
+    bank = Bank.load(bank_dir)
+    store = FlowStore(bank_dir / "store")
+    preprocess(bank, store=store, jobs=1, quiet=True)
+    nb = normalise(bank)
+    fwd, bwd = pair_flows(bank.shape, nb.lines["A"], nb.lines["E"], bank.warp)
+    got_f, got_b = store.get_pair(bank, "A", "E")
+    # float16 rounding plus zeroing below CROP_EPS: the documented cost of compact storage
+    for got, want in ((got_f, fwd), (got_b, bwd)):
+        err = np.abs(got.full() - want)
+        assert err.max() <= max(CROP_EPS, np.abs(want).max() * 2.0 ** -11) + 1e-6
+    # reversed order gives swapped roles
+    rf, rb = store.get_pair(bank, "E", "A")
+    np.testing.assert_array_equal(rf.full(), got_b.full())
+    # symmetric storage keeps about half the columns of each crop
+    assert store.size_bytes() < 6 * 2 * bank.shape[0] * bank.shape[1] * 2 * 2 * 0.6
+
+
+def test_store_entries_are_deterministic(bank_dir, tmp_path):
+    bank = Bank.load(bank_dir)
+    s1, s2 = FlowStore(tmp_path / "s1"), FlowStore(tmp_path / "s2")
+    preprocess(bank, store=s1, jobs=1, quiet=True)
+    preprocess(bank, store=s2, jobs=2, quiet=True)
+    names1 = sorted(p.name for p in s1.entries())
+    assert names1 == sorted(p.name for p in s2.entries())
+    for name in names1:
+        assert (s1.root / "flows" / name).read_bytes() == (s2.root / "flows" / name).read_bytes()
+    assert len(all_pairs(bank.names)) == 6
+
+
+def test_stale_temp_files_of_dead_processes_are_removed(bank_dir):
+    bank = Bank.load(bank_dir)
+    store = FlowStore(bank_dir / "store")
+    (store.root / "flows").mkdir(parents=True)
+    stale = store.root / "flows" / ".tmp-999999999-abcd"
+    stale.write_bytes(b"half")
+    preprocess(bank, store=store, jobs=1, quiet=True)
+    assert not stale.exists()
