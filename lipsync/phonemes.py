@@ -1,0 +1,486 @@
+"""Phone sets and phoneme-to-viseme maps, as data in ``configs/``.
+
+* ``configs/phonesets/<name>.yaml`` — a canonical phone set plus the aliases that bring
+  other notations into it (the shipped ``english`` set: ARPAbet, TIMIT, MFA English IPA).
+* ``configs/maps/<name>.yaml`` — a :class:`PhonemeMap` (DESIGN.md's format): ``silence``
+  and ``fallback`` visemes, ``map`` from phone to a viseme or a list of visemes (a list
+  splits the phone's time evenly: diphthongs), optional ``closures`` (visemes that must be
+  reached fully even when short), ``aliases`` (other names of each viseme, e.g. the
+  Preston Blair names of Rhubarb's shapes) and ``phoneset``.
+
+A label is looked up in this order: as written in ``map``; as a silence label (of the
+phone set, case-insensitive); through the phone set to its canonical phone; upper-cased.
+A label none of these finds goes to ``fallback`` with one warning per label.
+
+Examples
+--------
+>>> from lipsync.timeline import Segment, Timeline
+>>> pmap = load_map("english-to-rhubarb")
+>>> tl = Timeline((Segment(0, .1, "sil"), Segment(.1, .2, "M"), Segment(.2, .4, "AY1")))
+>>> [(s.label, round(s.end, 2)) for s in map_timeline(tl, pmap)]
+[('X', 0.1), ('A', 0.2), ('D', 0.3), ('B', 0.4)]
+"""
+
+from __future__ import annotations
+
+import functools
+import os
+import re
+import warnings
+from pathlib import Path
+from typing import Dict, Iterable, List, Mapping, Optional, Sequence, Tuple, Union
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+
+from ._data import data_dir
+from .errors import InputError, MapError, UnknownNameError
+from .registry import Registry
+from .timeline import PHONEME, VISEME, Segment, Timeline
+
+PathLike = Union[str, "os.PathLike[str]"]
+
+DEFAULT_MAP = "english-to-rhubarb"
+DEFAULT_PHONESET = "english"
+
+
+_STRESS = re.compile(r"^[A-Za-z]+[0-2]$")
+
+
+class UnknownLabelWarning(UserWarning):
+    """A timeline label that the phoneme map does not know (shown once per label)."""
+
+
+# --- phone sets ---------------------------------------------------------------------------
+
+
+class PhoneSet(BaseModel):
+    """A canonical phone set and the aliases that normalise other notations into it.
+
+    Examples
+    --------
+    >>> ps = load_phoneset("english")
+    >>> ps.normalise("ah"), ps.normalise("tʲ"), ps.normalise("iː"), ps.normalise("h#"), ps.normalise("??")
+    ('AH', 'T', 'IY', '', None)
+    """
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    name: str
+    description: str = ""
+    phones: Dict[str, str]
+    silence: List[str] = Field(default_factory=list)
+    aliases: Dict[str, str] = Field(default_factory=dict)
+    strip_marks: List[str] = Field(default_factory=list)
+    # ARPAbet stress digits (AH0, AY1) carry no mouth-shape information.
+    strip_stress: bool = True
+
+    @model_validator(mode="after")
+    def _aliases_target_phones(self) -> "PhoneSet":
+        bad = sorted({v for v in self.aliases.values() if v not in self.phones})
+        if bad:
+            raise ValueError(f"aliases point to phones not in the set: {', '.join(bad)}")
+        return self
+
+    @functools.cached_property
+    def _silence_lower(self) -> frozenset:
+        return frozenset(s.lower() for s in self.silence)
+
+    def is_silence(self, label: str) -> bool:
+        """True for labels that mean silence (case-insensitive)."""
+        return label.strip().lower() in self._silence_lower
+
+    def normalise(self, label: str) -> Optional[str]:
+        """The canonical phone for ``label``, ``""`` for silence, or None if unknown."""
+        label = label.strip()
+        if self.is_silence(label):
+            return ""
+        for candidate in (label, label.upper()):
+            if candidate in self.phones:
+                return candidate
+        for candidate in (label, label.lower()):
+            if candidate in self.aliases:
+                return self.aliases[candidate]
+        if self.strip_stress and _STRESS.match(label):
+            return self.normalise(label[:-1])
+        stripped = label
+        for mark in self.strip_marks:
+            stripped = stripped.replace(mark, "")
+        if stripped != label and stripped:
+            return self.normalise(stripped)
+        return None
+
+
+# --- maps ---------------------------------------------------------------------------------
+
+
+class PhonemeMap(BaseModel):
+    """A phoneme-to-viseme map (DESIGN.md's ``configs/maps/<name>.yaml`` format).
+
+    Examples
+    --------
+    >>> m = PhonemeMap(name="tiny", silence="rest", fallback="open", map={"M": "closed", "AY": ["open", "wide"]})
+    >>> m.targets("AY"), m.targets("sil"), m.visemes()
+    (['open', 'wide'], ['rest'], ['closed', 'open', 'rest', 'wide'])
+    """
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    name: str
+    description: str = ""
+    silence: str
+    fallback: str
+    map: Dict[str, Union[str, List[str]]]
+    closures: List[str] = Field(default_factory=list)
+    aliases: Dict[str, List[str]] = Field(default_factory=dict)
+    phoneset: Optional[str] = DEFAULT_PHONESET
+
+    @field_validator("silence", "fallback")
+    @classmethod
+    def _non_empty(cls, v: str) -> str:
+        if not v.strip():
+            raise ValueError("must be a viseme name, not empty")
+        return v.strip()
+
+    @field_validator("map")
+    @classmethod
+    def _targets_non_empty(cls, v: Dict[str, Union[str, List[str]]]) -> Dict[str, Union[str, List[str]]]:
+        for label, target in v.items():
+            items = [target] if isinstance(target, str) else target
+            if not items or any(not t.strip() for t in items):
+                raise ValueError(f"phone {label!r} maps to no viseme")
+        return v
+
+    @model_validator(mode="after")
+    def _closures_known(self) -> "PhonemeMap":
+        known = set(self.visemes())
+        bad = [c for c in self.closures if c not in known]
+        if bad:
+            raise ValueError(f"closures name visemes the map never uses: {', '.join(bad)}")
+        bad = [v for v in self.aliases if v not in known]
+        if bad:
+            raise ValueError(f"aliases given for visemes the map never uses: {', '.join(bad)}")
+        return self
+
+    def visemes(self) -> List[str]:
+        """Every viseme the map can produce (sorted)."""
+        out = {self.silence, self.fallback}
+        for target in self.map.values():
+            out.update([target] if isinstance(target, str) else target)
+        return sorted(out)
+
+    @functools.cached_property
+    def _phoneset(self) -> Optional[PhoneSet]:
+        return load_phoneset(self.phoneset) if self.phoneset else None
+
+    def is_silence(self, label: str) -> bool:
+        """True if ``label`` means silence for this map."""
+        ps = self._phoneset
+        if ps is not None:
+            return ps.is_silence(label)
+        return label.strip().lower() in _BUILTIN_SILENCE
+
+    def targets(self, label: str) -> Optional[List[str]]:
+        """The visemes for ``label`` (several for a split phone), or None if unknown."""
+        if label in self.map:
+            return _as_list(self.map[label])
+        if self.is_silence(label):
+            return [self.silence]
+        ps = self._phoneset
+        if ps is not None:
+            canon = ps.normalise(label)
+            if canon == "":
+                return [self.silence]
+            if canon is not None and canon in self.map:
+                return _as_list(self.map[canon])
+        if label.upper() in self.map:
+            return _as_list(self.map[label.upper()])
+        return None
+
+    def renamed(self, names: Mapping[str, str]) -> "PhonemeMap":
+        """A copy with every viseme renamed through ``names`` (missing keys unchanged)."""
+        r = lambda v: names.get(v, v)  # noqa: E731
+        return self.model_copy(update=dict(
+            silence=r(self.silence), fallback=r(self.fallback),
+            map={k: (r(t) if isinstance(t, str) else [r(x) for x in t]) for k, t in self.map.items()},
+            closures=[r(c) for c in self.closures],
+            aliases={r(k): v for k, v in self.aliases.items()}))
+
+
+# Used only by maps that name no phone set.
+_BUILTIN_SILENCE = frozenset(["", "sil", "sp", "spn", "h#", "pau", "epi", "<sil>", "<eps>", "silence"])
+
+
+def _as_list(target: Union[str, List[str]]) -> List[str]:
+    return [target] if isinstance(target, str) else list(target)
+
+
+# --- loading ------------------------------------------------------------------------------
+
+
+def _yaml_line(text: str, loc: Sequence[Union[str, int]]) -> Optional[int]:
+    """1-based line of the YAML node at ``loc`` (pydantic's error location), if found."""
+    import yaml
+
+    try:
+        node = yaml.compose(text, Loader=yaml.SafeLoader)
+    except yaml.YAMLError:
+        return None
+    line = None
+    for key in loc:
+        if node is None:
+            break
+        line = node.start_mark.line + 1
+        nxt = None
+        if isinstance(node, yaml.MappingNode):
+            for k, v in node.value:
+                if k.value == str(key):
+                    line, nxt = k.start_mark.line + 1, v
+                    break
+        elif isinstance(node, yaml.SequenceNode) and isinstance(key, int) and key < len(node.value):
+            nxt = node.value[key]
+            line = nxt.start_mark.line + 1
+        node = nxt
+    return line
+
+
+def _load_yaml_model(model, path: Path, error):
+    import yaml
+
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise error("no such file", path=path) from None
+    except UnicodeDecodeError as exc:
+        raise error(f"not UTF-8 text ({exc.reason})", path=path) from None
+    except OSError as exc:
+        raise error(f"cannot read: {exc.strerror or exc}", path=path) from None
+    try:
+        data = yaml.safe_load(text)
+    except yaml.MarkedYAMLError as exc:
+        line = exc.problem_mark.line + 1 if exc.problem_mark else None
+        raise error(f"not valid YAML ({exc.problem})", path=path, line=line) from None
+    except yaml.YAMLError as exc:
+        raise error(f"not valid YAML ({exc})", path=path) from None
+    if not isinstance(data, dict):
+        raise error("expected a YAML mapping (name:, silence:, map:, ...)", path=path, line=1)
+    try:
+        return model.model_validate(data)
+    except ValidationError as exc:
+        first = exc.errors()[0]
+        loc = [p for p in first["loc"]]
+        field = ".".join(str(p) for p in loc) or "(top level)"
+        raise error(f"{field}: {first['msg']}", path=path, line=_yaml_line(text, loc)) from None
+
+
+PHONESETS: Registry[Path] = Registry("phone set")
+MAPS: Registry[Path] = Registry("phoneme map")
+
+
+def _register_shipped() -> None:
+    try:
+        root = data_dir("configs")
+    except FileNotFoundError:
+        return
+    for path in sorted((root / "phonesets").glob("*.yaml")):
+        PHONESETS.register(path.stem, path)
+    for path in sorted((root / "maps").glob("*.yaml")):
+        # "english-to-rhubarb" is also reachable as "rhubarb".
+        short = path.stem.split("-to-", 1)[-1]
+        MAPS.register(path.stem, path, aliases=(short,) if short != path.stem else ())
+
+
+_register_shipped()
+
+
+@functools.lru_cache(maxsize=None)
+def load_phoneset(name: str) -> PhoneSet:
+    """A shipped phone set by name (``configs/phonesets/<name>.yaml``)."""
+    return _load_yaml_model(PhoneSet, PHONESETS.get(name), MapError)
+
+
+def load_map(name_or_path: Union[str, PathLike, None] = None) -> PhonemeMap:
+    """Load a shipped map by name or any map file by path.
+
+    Parameters
+    ----------
+    name_or_path : str or path-like, optional
+        A name from ``MAPS.names()`` (or its short alias such as ``rhubarb``), or a YAML file
+        in DESIGN.md's map format. Default: ``english-to-rhubarb``.
+
+    Raises
+    ------
+    MapError
+        The file is not a valid map (message names the file, line and field).
+    UnknownNameError
+        Not a shipped name and not an existing file.
+
+    Examples
+    --------
+    >>> load_map("oculus").targets("p")
+    ['PP']
+    """
+    if name_or_path is None:
+        name_or_path = DEFAULT_MAP
+    text = os.fspath(name_or_path)
+    if text in MAPS:
+        path = MAPS.get(text)
+    elif os.path.exists(text) or text.endswith((".yaml", ".yml")) or os.sep in text:
+        path = Path(text)
+    else:
+        raise UnknownNameError(f"unknown phoneme map {text!r}: not a file; shipped maps: {', '.join(MAPS.names())}")
+    pmap = _load_yaml_model(PhonemeMap, path, MapError)
+    if pmap.phoneset is not None and pmap.phoneset not in PHONESETS:
+        raise MapError(f"phoneset {pmap.phoneset!r} is not shipped; valid: {', '.join(PHONESETS.names())}",
+                       path=path, line=_yaml_line(path.read_text(encoding="utf-8"), ["phoneset"]))
+    return pmap
+
+
+# --- mapping ------------------------------------------------------------------------------
+
+
+def map_timeline(timeline: Timeline, pmap: PhonemeMap, *, rest: Optional[str] = None) -> Timeline:
+    """Phoneme timeline -> viseme timeline.
+
+    Silence labels map to ``rest`` if given, else ``pmap.silence``; gaps stay gaps (the
+    sequencer shows rest there). A phone mapped to several visemes has its time split
+    evenly among them. Unknown labels map to ``pmap.fallback``, with one
+    :class:`UnknownLabelWarning` per distinct label. A viseme timeline is returned unchanged.
+
+    Examples
+    --------
+    >>> import warnings
+    >>> from lipsync.timeline import Segment, Timeline
+    >>> tl = Timeline((Segment(0, .1, "pau"), Segment(.1, .2, "zzz")))
+    >>> with warnings.catch_warnings(record=True) as w:
+    ...     warnings.simplefilter("always")
+    ...     out = map_timeline(tl, load_map("rhubarb"), rest="rest")
+    >>> out.labels(), len(w)
+    (['rest', 'C'], 1)
+    """
+    if timeline.kind == VISEME:
+        return timeline
+    cache: Dict[str, List[str]] = {}
+    unknown: List[str] = []
+    segments: List[Segment] = []
+    for seg in timeline:
+        targets = cache.get(seg.label)
+        if targets is None:
+            if seg.label not in pmap.map and pmap.is_silence(seg.label):
+                targets = [rest if rest is not None else pmap.silence]
+            else:
+                targets = pmap.targets(seg.label)
+                if targets is None:
+                    unknown.append(seg.label)
+                    targets = [pmap.fallback]
+            cache[seg.label] = targets
+        step = (seg.end - seg.start) / len(targets)
+        for i, v in enumerate(targets):
+            end = seg.end if i == len(targets) - 1 else seg.start + (i + 1) * step
+            segments.append(Segment(seg.start + i * step, end, v))
+    for label in unknown:
+        warnings.warn(f"{timeline.path or 'timeline'}: label {label!r} is not in map {pmap.name!r}; "
+                      f"showing fallback viseme {pmap.fallback!r}", UnknownLabelWarning, stacklevel=2)
+    return Timeline(tuple(segments), kind=VISEME, path=timeline.path, stated_end=timeline.stated_end)
+
+
+def unknown_labels(timeline: Timeline, pmap: PhonemeMap) -> List[str]:
+    """Distinct labels of a phoneme timeline that ``pmap`` does not know, in order of appearance."""
+    if timeline.kind == VISEME:
+        return []
+    seen: Dict[str, None] = {}
+    for seg in timeline:
+        if seg.label not in seen and not pmap.is_silence(seg.label) and pmap.targets(seg.label) is None:
+            seen[seg.label] = None
+    return list(seen)
+
+
+# --- viseme names: map <-> bank -----------------------------------------------------------
+
+
+def resolve_visemes(pmap: PhonemeMap, viseme_names: Iterable[str]) -> Tuple[Dict[str, str], List[str]]:
+    """Match the map's visemes to a bank's viseme names.
+
+    Returns ``(names, missing)``: ``names`` maps each map viseme to the bank's name for it;
+    ``missing`` lists map visemes the bank has under no name. If the bank has every viseme
+    under the map's own names they are used; otherwise, if it has every one under an alias
+    (e.g. the Preston Blair names), the aliases are used, so that an alias equal to another
+    viseme's own name (Preston Blair "E" is Rhubarb's C, not its E) resolves consistently.
+
+    Examples
+    --------
+    >>> pb = ["MBP", "etc", "E", "AI", "O", "U", "FV", "L", "rest"]
+    >>> names, missing = resolve_visemes(load_map("rhubarb"), pb)
+    >>> names["C"], names["E"], names["X"], missing
+    ('E', 'O', 'rest', [])
+    """
+    bank = list(viseme_names)
+    bank_set = set(bank)
+    lower = {n.lower(): n for n in bank}
+    wanted = pmap.visemes()
+    if all(v in bank_set for v in wanted):
+        return {v: v for v in wanted}, []
+
+    def via_alias(v: str) -> Optional[str]:
+        for alias in pmap.aliases.get(v, []):
+            if alias in bank_set:
+                return alias
+            if alias.lower() in lower:
+                return lower[alias.lower()]
+        return None
+
+    by_alias = {v: via_alias(v) for v in wanted}
+    if all(by_alias.values()):
+        return dict(by_alias), []  # type: ignore[arg-type]
+    names, missing = {}, []
+    for v in wanted:
+        if v in bank_set:
+            names[v] = v
+        elif by_alias[v]:
+            names[v] = by_alias[v]
+        else:
+            missing.append(v)
+    return names, missing
+
+
+def check_map_against(pmap: PhonemeMap, viseme_names: Iterable[str], *, path: Optional[PathLike] = None) -> Dict[str, str]:
+    """Raise MapError if ``pmap`` targets a viseme the bank lacks; return the name matching.
+
+    Examples
+    --------
+    >>> check_map_against(load_map("oculus"), ["sil", "PP"])
+    Traceback (most recent call last):
+    ...
+    lipsync.errors.MapError: map 'english-to-oculus' uses visemes the bank lacks: CH, DD, E, FF, I, O, RR, SS, TH, U, aa, kk, nn (bank has: PP, sil)
+    """
+    bank = list(viseme_names)
+    names, missing = resolve_visemes(pmap, bank)
+    if missing:
+        raise MapError(f"map {pmap.name!r} uses visemes the bank lacks: {', '.join(missing)} "
+                       f"(bank has: {', '.join(sorted(bank))})", path=path)
+    return names
+
+
+def canonical_viseme_timeline(timeline: Timeline, pmap: PhonemeMap) -> Timeline:
+    """A viseme timeline's labels in the map's own viseme names (aliases translated).
+
+    Used for files that are already visemes (Rhubarb, Moho): Papagayo writes the Preston
+    Blair names (MBP, etc, AI, ..., rest), Rhubarb writes A-H and X. If every label is one of
+    the map's own names they are kept; otherwise labels are read as aliases where they are one.
+
+    Examples
+    --------
+    >>> from lipsync.timeline import Segment, Timeline
+    >>> tl = Timeline((Segment(0, 1, "rest"), Segment(1, 2, "E"), Segment(2, 3, "MBP")), kind="viseme")
+    >>> canonical_viseme_timeline(tl, load_map("rhubarb")).labels()
+    ['X', 'C', 'A']
+    """
+    own = set(pmap.visemes())
+    labels = {s.label for s in timeline}
+    if labels <= own:
+        return timeline
+    reverse: Dict[str, str] = {}
+    for v, aliases in pmap.aliases.items():
+        for a in aliases:
+            reverse.setdefault(a.lower(), v)
+    segs = tuple(Segment(s.start, s.end, reverse.get(s.label.lower(), s.label)) for s in timeline)
+    return timeline.replace(segments=segs)
