@@ -87,3 +87,10 @@ def write_bank(folder: Path, shapes=None, *, symmetry: bool = True) -> Path:
     spec = {"name": "synthetic", "rest": "X", "symmetry": symmetry, "visemes": visemes}
     (folder / "bank.yaml").write_text(yaml.safe_dump(spec, sort_keys=False))
     return folder
+
+
+#: A synthetic bank with Rhubarb's nine shape names, for end-to-end tests with the default map.
+RHUBARB_SHAPES = {
+    "X": (30.0, 4.0), "A": (28.0, 2.5), "B": (34.0, 7.0), "C": (38.0, 14.0), "D": (40.0, 24.0),
+    "E": (30.0, 16.0), "F": (18.0, 12.0), "G": (34.0, 5.0), "H": (36.0, 18.0),
+}

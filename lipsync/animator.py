@@ -1,0 +1,126 @@
+"""The embedding API: a timeline and a bank in, RGB frames out.
+
+The whole pipeline in one place (DESIGN.md)::
+
+    read_timeline -> map_timeline -> sequence -> Renderer.render per FrameSpec
+
+Examples
+--------
+>>> from lipsync import Animator, Bank, Segment, Timeline
+>>> from lipsync._data import default_bank_dir
+>>> bank = Bank.load(default_bank_dir())
+>>> tl = Timeline((Segment(0.0, 0.3, "M"), Segment(0.3, 0.7, "AA"), Segment(0.7, 1.0, "sil")),
+...               kind="phoneme")
+>>> anim = Animator(bank, tl, fps=25)
+>>> len(anim), anim.frame_at(0.5).shape
+(25, (512, 512, 3))
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from typing import Iterator, List, Optional, Union
+
+import numpy as np
+
+from .bank import Bank
+from .errors import InputError
+from .phonemes import DEFAULT_MAP, PhonemeMap, canonical_viseme_timeline, check_map_against, load_map, map_timeline
+from .render import Renderer
+from .sequencer import FrameSpec, check_fps, sequence
+from .store import FlowStore
+from .timeline import VISEME, Timeline, read_timeline
+from .timing import DEFAULT_CURVE
+
+
+class Animator:
+    """Frames of a talking head for a timeline, by index, by time, or as a stream.
+
+    Parameters
+    ----------
+    bank : Bank or path-like
+        The subject (a loaded bank or its folder).
+    timeline : Timeline or path-like
+        A phoneme or viseme timeline, or a file any reader understands.
+    fps : float
+        Output frame rate, 1 to 120.
+    map : str, path-like or PhonemeMap, optional
+        Phoneme-to-viseme map (default: the shipped English to Rhubarb-shapes map).
+    method : str
+        Renderer method: ``flow`` (default), ``splat``, ``beier-neely`` or ``dissolve``.
+    timing : str or callable
+        Transition timing curve (default: the paper's text reading, ``sqrt-fast-middle``).
+    store : FlowStore, optional
+        Flow store (default: the bank's). Missing flows are computed on first use.
+    timeline_options : argparse.Namespace, optional
+        Reader options (``timeline_format``, ``tier``, ``sample_rate``, ``moho_fps``) used
+        when ``timeline`` is a path.
+
+    Attributes
+    ----------
+    specs : list of FrameSpec
+        One per frame: ``(from_viseme, to_viseme, alpha)``.
+    visemes : Timeline
+        The mapped viseme timeline.
+    """
+
+    def __init__(self, bank: Union[Bank, str, "os.PathLike[str]"], timeline, fps: float = 25, *,
+                 map: Union[str, "os.PathLike[str]", PhonemeMap, None] = None, method: str = "flow",
+                 timing=DEFAULT_CURVE, store: Optional[FlowStore] = None, timeline_options=None):
+        self.bank = bank if isinstance(bank, Bank) else Bank.load(bank)
+        self.fps = check_fps(fps)
+        if not isinstance(timeline, Timeline):
+            o = timeline_options
+            timeline = read_timeline(timeline, getattr(o, "timeline_format", None), tier=getattr(o, "tier", None),
+                                     sample_rate=getattr(o, "sample_rate", 16000),
+                                     fps=getattr(o, "moho_fps", 24.0))
+        pmap = map if isinstance(map, PhonemeMap) else load_map(map or DEFAULT_MAP)
+        if timeline.kind == VISEME:
+            timeline = canonical_viseme_timeline(timeline, pmap)
+        names = check_map_against(pmap, self.bank.names)
+        pmap = pmap.renamed(names)
+        if timeline.kind == VISEME:
+            timeline = timeline.replace(segments=tuple(
+                type(s)(s.start, s.end, names.get(s.label, s.label)) for s in timeline))
+            unknown = sorted({s.label for s in timeline} - set(self.bank.names))
+            if unknown:
+                raise InputError(f"visemes not in the bank: {', '.join(unknown)}", path=timeline.path)
+        self.visemes = map_timeline(timeline, pmap, rest=self.bank.rest)
+        self.specs: List[FrameSpec] = sequence(self.visemes, fps=self.fps, rest=self.bank.rest, timing=timing,
+                                               closures=pmap.closures)
+        self.renderer = Renderer(self.bank, method=method, store=store)
+
+    def __len__(self) -> int:
+        return len(self.specs)
+
+    @property
+    def duration(self) -> float:
+        """Seconds covered by the frames (``len(self) / fps``)."""
+        return len(self.specs) / self.fps
+
+    def frame(self, index: int, *, out: Optional[np.ndarray] = None) -> np.ndarray:
+        """Frame ``index`` (it shows time ``index / fps``), a new array unless ``out`` is given."""
+        if not 0 <= index < len(self.specs):
+            raise IndexError(f"frame {index} out of range 0..{len(self.specs) - 1}")
+        spec = self.specs[index]
+        if out is None:
+            out = np.empty(self.renderer.shape + (3,), np.uint8)
+        return self.renderer.render(spec.from_viseme, spec.to_viseme, spec.alpha, out=out)
+
+    def frame_at(self, t: float) -> np.ndarray:
+        """The frame shown at time ``t`` seconds (the frame whose interval holds ``t``)."""
+        if not math.isfinite(t):
+            raise ValueError(f"time must be finite, got {t}")
+        index = min(max(int(math.floor(t * self.fps + 1e-9)), 0), len(self.specs) - 1)
+        return self.frame(index)
+
+    def frames(self, *, copy: bool = True) -> Iterator[np.ndarray]:
+        """Every frame in order.
+
+        With ``copy=False`` each yielded array is the renderer's buffer, valid until the
+        next frame is requested: the fast path for streaming to an encoder.
+        """
+        for spec in self.specs:
+            frame = self.renderer.render(spec.from_viseme, spec.to_viseme, spec.alpha)
+            yield frame.copy() if copy else frame
