@@ -8,12 +8,12 @@ figure caption disagree about which way round (erratum 2 in DESIGN.md):
 
 ``sqrt-fast-middle``  (the paper's *text*)
     f(t) = 0.5 - 0.5*sqrt(1 - 2t) for t < 0.5, 0.5 + 0.5*sqrt(2t - 1) after.
-    Slope is infinite at t = 0.5 and zero at both ends: the mouth eases out of one shape,
+    Slope 1/2 at both ends and unbounded at t = 0.5: the mouth eases out of one shape,
     moves quickly through the in-between, and settles gently into the next.
 ``sqrt-fast-ends``  (the paper's *fig. 6 caption*)
     f(t) = 0.5*sqrt(2t) for t < 0.5, 1 - 0.5*sqrt(2 - 2t) after.
-    Infinite slope at both ends, flat in the middle: it jumps away from a shape, lingers on
-    the half-way blend, then snaps onto the target.
+    Unbounded slope at both ends, slope 1/2 in the middle: it jumps away from a shape,
+    lingers on the half-way blend, then snaps onto the target.
 
 **Default: sqrt-fast-middle.** Real articulators accelerate and decelerate (they have mass),
 which is what the text describes and what animators' "slow in, slow out" does; it also keeps
@@ -75,7 +75,7 @@ def sqrt_fast_ends(t: ArrayLike) -> ArrayLike:
 
 
 def smoothstep(t: ArrayLike) -> ArrayLike:
-    """3t² − 2t³: zero slope at both ends, finite everywhere (a gentler sqrt-fast-middle)."""
+    """3t² − 2t³: zero slope at both ends, slope 3/2 in the middle (a bounded ease-in-out)."""
     x = _clip(t)
     return _out(t, x * x * (3.0 - 2.0 * x))
 
