@@ -12,8 +12,9 @@ a few small passes, each with one rule):
 2. adjacent equal visemes merge;
 3. a pause shorter than ``MAX_HELD_PAUSE_S`` between two spoken visemes holds the viseme
    before it; longer pauses return to rest;
-4. a non-closure segment shorter than ``MIN_SEGMENT_S`` is dropped, its time split between
-   its neighbours at its midpoint (it would only be a flicker); closures are never dropped;
+4. a segment shorter than ``MIN_SEGMENT_S`` is dropped, its time split between its
+   neighbours at its midpoint (it would only be a flicker); closures and rest (leading or
+   trailing silence) are never dropped;
 5. every boundary gets a transition of at most ``MAX_TRANSITION_S``, centred on the boundary,
    but never starting before the source segment's hold window nor ending after the target's:
    a segment of 200 ms or more therefore holds its viseme exactly for
@@ -84,7 +85,7 @@ RULES: Tuple[Tuple[str, str, str], ...] = (
      "speakers do not relax the mouth in short gaps; rest-and-back looks like chattering"),
     ("long-pause-rest", f"pauses >= {MAX_HELD_PAUSE_S * 1000:.0f} ms (and leading/trailing silence) show rest",
      "the mouth relaxes when the speaker stops"),
-    ("drop-short", f"non-closure segments < {MIN_SEGMENT_S * 1000:.0f} ms are dropped",
+    ("drop-short", f"non-closure, non-rest segments < {MIN_SEGMENT_S * 1000:.0f} ms are dropped",
      "too short to be reached; showing them would flash for a frame"),
     ("closures-kept", "closure visemes are never dropped and are shown exactly on at least one frame",
      "a P, B or M without closed lips is the most visible lip-sync error"),
@@ -208,8 +209,10 @@ def plan_segments(visemes: Timeline, *, rest: str, closures: Iterable[str] = (),
     # Rule 4: drop short non-closure segments, shortest first, so that a run of short ones
     # keeps the longest of them; the freed time goes half to each neighbour.
     while len(segs) > 1:
+        # Rest is exempt: inner pauses that survive rule 3 are long, and leading or trailing
+        # silence, however short, keeps the first and last frames at rest.
         candidates = [i for i, s in enumerate(segs)
-                      if s.length < min_segment and s.viseme not in closure_set]
+                      if s.length < min_segment and s.viseme not in closure_set and s.viseme != rest]
         if not candidates:
             break
         i = min(candidates, key=lambda k: segs[k].length)
