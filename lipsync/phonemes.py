@@ -341,8 +341,8 @@ def load_map(name_or_path: Union[str, PathLike, None] = None) -> PhonemeMap:
 def map_timeline(timeline: Timeline, pmap: PhonemeMap, *, rest: Optional[str] = None) -> Timeline:
     """Phoneme timeline -> viseme timeline.
 
-    Silence labels map to ``rest`` if given, else ``pmap.silence``; gaps stay gaps (the
-    sequencer shows rest there). A phone mapped to several visemes has its time split
+    Silence labels, and gaps (time with no segment, up to the file's stated end), become
+    ``rest`` if given, else ``pmap.silence``, so the result covers the whole file. A phone mapped to several visemes has its time split
     evenly among them. Unknown labels map to ``pmap.fallback``, with one
     :class:`UnknownLabelWarning` per distinct label. A viseme timeline is returned unchanged.
 
@@ -362,11 +362,16 @@ def map_timeline(timeline: Timeline, pmap: PhonemeMap, *, rest: Optional[str] = 
     cache: Dict[str, List[str]] = {}
     unknown: List[str] = []
     segments: List[Segment] = []
+    silence = rest if rest is not None else pmap.silence
+    t = 0.0
     for seg in timeline:
+        if seg.start > t:  # a gap is silence
+            segments.append(Segment(t, seg.start, silence))
+        t = seg.end
         targets = cache.get(seg.label)
         if targets is None:
             if seg.label not in pmap.map and pmap.is_silence(seg.label):
-                targets = [rest if rest is not None else pmap.silence]
+                targets = [silence]
             else:
                 targets = pmap.targets(seg.label)
                 if targets is None:
@@ -377,6 +382,8 @@ def map_timeline(timeline: Timeline, pmap: PhonemeMap, *, rest: Optional[str] = 
         for i, v in enumerate(targets):
             end = seg.end if i == len(targets) - 1 else seg.start + (i + 1) * step
             segments.append(Segment(seg.start + i * step, end, v))
+    if timeline.stated_end is not None and timeline.stated_end > t:
+        segments.append(Segment(t, float(timeline.stated_end), silence))
     for label in unknown:
         warnings.warn(f"{timeline.path or 'timeline'}: label {label!r} is not in map {pmap.name!r}; "
                       f"showing fallback viseme {pmap.fallback!r}", UnknownLabelWarning, stacklevel=2)

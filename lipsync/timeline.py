@@ -9,8 +9,9 @@ Silence convention
 Intervals that carry **no label** in the file (an empty TextGrid interval, the time between
 two Audacity labels, a Gentle word that was not found in the audio) are **left out**: they
 are gaps between segments. Labels that *name* silence (``sil``, ``sp``, ``h#``, ``pau``, ...)
-are kept as the file writes them. The phoneme mapper and the sequencer treat both gaps and
-silence labels as silence, so a reader never has to invent segments.
+are kept as the file writes them. The phoneme mapper (:func:`lipsync.phonemes.map_timeline`)
+turns both gaps and silence labels into the rest viseme, and the sequencer also shows rest in
+any gap left in a viseme timeline, so a reader never has to invent segments.
 
 Reader lookup (the same order as imageio's plugins): an explicit ``format`` first, then the
 file extension, then content sniffing of the first bytes; an unknown format name raises

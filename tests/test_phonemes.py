@@ -67,9 +67,13 @@ def test_map_timeline_silence_rest_split_and_gaps():
     out = map_timeline(src, pmap, rest="neutral")
     assert out.kind == "viseme"
     assert [(s.start, s.end, s.label) for s in out] == [
-        (0.0, 0.1, "neutral"), (0.1, 0.2, "A"), (0.3, pytest.approx(0.45), "D"),
+        (0.0, 0.1, "neutral"), (0.1, 0.2, "A"), (0.2, 0.3, "neutral"), (0.3, pytest.approx(0.45), "D"),
         (pytest.approx(0.45), 0.6, "B"), (0.6, 0.7, "neutral")]
     assert [s.label for s in map_timeline(src, pmap)][0] == "X"  # default: the map's silence viseme
+    # A leading gap and the time up to the file's stated end are silence too.
+    late = Timeline((Segment(0.5, 0.6, "AA"),), stated_end=1.0)
+    assert [(s.start, s.end, s.label) for s in map_timeline(late, pmap)] == [
+        (0.0, 0.5, "X"), (0.5, 0.6, "D"), (0.6, 1.0, "X")]
 
 
 def test_unknown_labels_warn_once_per_label():
