@@ -8,8 +8,8 @@ The pipeline, one module per stage (see README.md)::
 Examples
 --------
 >>> import lipsync
->>> sorted(lipsync.timing.CURVES.names())[:2]
-['ease-in-out-sqrt', 'ease-out-in-sqrt']
+>>> sorted(lipsync.timing.CURVES.names())
+['linear', 'smoothstep', 'sqrt-fast-ends', 'sqrt-fast-middle']
 """
 
 from __future__ import annotations

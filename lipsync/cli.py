@@ -48,11 +48,22 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _show_warning(message, category, filename, lineno, file=None, line=None):
+    # Users see "lipsync: warning: <what>", not Python's source location.
+    print(f"lipsync: warning: {message}", file=file or sys.stderr)
+
+
 def main(argv: Optional[List[str]] = None) -> int:
     """Entry point of the ``lipsync`` console script; returns the exit code."""
+    import warnings
+
+    from .encode import EncodeError
+
     parser = build_parser()
     args = parser.parse_args(argv)
     func: Callable[[argparse.Namespace], int] = args.func
+    saved = warnings.showwarning
+    warnings.showwarning = _show_warning
     try:
         return int(func(args) or 0)
     except InputError as exc:
@@ -63,9 +74,11 @@ def main(argv: Optional[List[str]] = None) -> int:
         return EXIT_INTERRUPTED
     except BrokenPipeError:
         return EXIT_FAILURE
-    except OSError as exc:
+    except (OSError, EncodeError) as exc:
         print(f"lipsync: error: {exc}", file=sys.stderr)
         return EXIT_FAILURE
+    finally:
+        warnings.showwarning = saved
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -40,9 +40,11 @@ import numpy as np
 from .bank import Bank
 
 #: Bump when the flow computation or the entry layout changes: old entries become misses.
-FORMAT_VERSION = 1
-#: Displacements below this (px) are stored as zero: 1/64 px is invisible after bilinear
-#: sampling to 8 bits, and cropping to where flow exceeds it is what keeps entries small.
+FORMAT_VERSION = 2
+#: Displacements below this (px) are stored as zero: 1/64 px moves no edge by a visible
+#: amount after bilinear sampling to 8 bits. (Beier-Neely weights fall off only as
+#: 1/dist^2, so fields rarely vanish entirely; the renderer limits its work by what a
+#: displacement would visibly change instead, see lipsync.render.ROI_LEVEL.)
 CROP_EPS = 1.0 / 64
 _ZIP_TIME = (2000, 1, 1, 0, 0, 0)
 _TMP_PREFIX = ".tmp-"
@@ -66,7 +68,7 @@ class Crop:
         return self.y1 <= self.y0 or self.x1 <= self.x0
 
 
-def support_box(field: np.ndarray, axis: Optional[float], eps: float = CROP_EPS) -> Crop:
+def support_box(field: np.ndarray, axis: Optional[float], eps: float = None) -> Crop:
     """Bounding box of ``|field| > eps``, made symmetric about ``axis`` when given.
 
     Examples
@@ -77,6 +79,7 @@ def support_box(field: np.ndarray, axis: Optional[float], eps: float = CROP_EPS)
     >>> support_box(f, 2.5)
     Crop(y0=1, y1=3, x0=1, x1=5)
     """
+    eps = CROP_EPS if eps is None else eps
     h, w = field.shape[:2]
     mask = (np.abs(field[..., 0]) > eps) | (np.abs(field[..., 1]) > eps)
     rows = np.flatnonzero(mask.any(axis=1))

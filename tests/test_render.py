@@ -1,0 +1,146 @@
+"""In-between frames: end points, quality against a known truth, inversion accuracy, buffers."""
+
+import shutil
+import subprocess
+import sys
+
+import cv2
+import numpy as np
+import pytest
+
+import synthetic
+from lipsync import render as render_mod
+from lipsync.bank import Bank
+from lipsync.errors import InputError
+from lipsync.render import METHODS, Renderer, morph
+
+METHOD_NAMES = METHODS.names()
+
+
+@pytest.fixture(scope="module")
+def bank(synthetic_bank_dir, tmp_path_factory):
+    d = tmp_path_factory.mktemp("render") / "bank"
+    shutil.copytree(synthetic_bank_dir, d)
+    return Bank.load(d)
+
+
+@pytest.mark.parametrize("method", METHOD_NAMES)
+def test_alpha_end_points_reproduce_the_visemes(bank, method):
+    r = Renderer(bank, method=method)
+    # parts() runs the method itself at alpha 0 and 1 (render() short-cuts them to copies).
+    for a, b in (("X", "O"), ("E", "A")):
+        _, _, at0 = r.parts(a, b, 0.0)
+        _, _, at1 = r.parts(a, b, 1.0)
+        np.testing.assert_array_equal(at0, bank.images[a])
+        np.testing.assert_array_equal(at1, bank.images[b])
+        np.testing.assert_array_equal(r.render(a, b, 0.0), bank.images[a])
+        np.testing.assert_array_equal(r.render(a, b, 1.0), bank.images[b])
+
+
+def mouth_psnr(frame, truth):
+    # Over the box that holds every mouth shape (the rest is identical in all images).
+    cx, cy = synthetic.CENTRE
+    box = (slice(int(cy) - 30, int(cy) + 30), slice(int(cx) - 50, int(cx) + 51))
+    err = np.mean((frame[box].astype(float) - truth[box].astype(float)) ** 2)
+    return 10 * np.log10(255.0 ** 2 / err)
+
+
+@pytest.mark.parametrize("pair", [("X", "O"), ("O", "E"), ("A", "E")])
+def test_quality_against_the_true_in_between(bank, pair):
+    a, b = pair
+    (rx0, ry0), (rx1, ry1) = synthetic.SHAPES[a], synthetic.SHAPES[b]
+    scores = {m: [] for m in METHOD_NAMES}
+    for alpha in (0.25, 0.5, 0.75):
+        truth = synthetic.draw(rx0 + (rx1 - rx0) * alpha, ry0 + (ry1 - ry0) * alpha)
+        for m in METHOD_NAMES:
+            scores[m].append(mouth_psnr(Renderer(bank, method=m).render(a, b, alpha), truth))
+    mean = {m: float(np.mean(v)) for m, v in scores.items()}
+    assert mean["flow"] >= mean["beier-neely"] - 1.0, mean
+    assert mean["splat"] >= mean["beier-neely"] - 1.0, mean
+    for m in ("flow", "splat", "beier-neely"):
+        assert mean[m] >= mean["dissolve"] + 2.0, mean
+
+
+def test_fixed_point_inversion_converges(bank, monkeypatch):
+    r = Renderer(bank)
+    pair = r._pair("X", "O")
+    outs = {}
+    default = render_mod.FLOW_ITERATIONS
+    for iters in (default, 30):
+        monkeypatch.setattr(render_mod, "FLOW_ITERATIONS", iters)
+        r._invert(pair.fwd, pair.jac_f, 0.6, pair.grid, pair.map_a, pair.sampled, pair.work)
+        outs[iters] = pair.map_a.copy()
+    X = outs[default]
+    F = cv2.remap(pair.fwd, X, None, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    h, w = X.shape[:2]
+    inside = (X[..., 0] >= 0) & (X[..., 0] <= w - 1) & (X[..., 1] >= 0) & (X[..., 1] <= h - 1)
+    assert inside.mean() > 0.95
+    # the default steps solve X + alpha F(X) = Y: forward-map X and land back on the grid
+    residual = np.abs(X + 0.6 * F - pair.grid).max(axis=-1)[inside]
+    assert np.percentile(residual, 99.9) < 0.05 and residual.max() < 0.3
+    # the plain fixed-point iteration X <- Y - alpha F(X) diverges here (alpha |F'| > 1)
+    fp = pair.grid - 0.6 * pair.fwd
+    for _ in range(10):
+        fp = pair.grid - 0.6 * cv2.remap(pair.fwd, fp, None, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    Ffp = cv2.remap(pair.fwd, fp, None, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    assert np.abs(fp + 0.6 * Ffp - pair.grid).max() > 1.0
+
+
+def test_buffers_are_reused_correctly_across_pairs(bank):
+    r = Renderer(bank)
+    fresh = {p: Renderer(bank).render(*p, 0.4).copy() for p in (("X", "O"), ("E", "A"))}
+    for p in (("X", "O"), ("E", "A"), ("X", "O"), ("X", "X"), ("E", "A")):
+        if p[0] == p[1]:
+            np.testing.assert_array_equal(r.render(*p, 0.4), bank.images[p[0]])
+        else:
+            np.testing.assert_array_equal(r.render(*p, 0.4), fresh[p])
+
+
+def test_rendering_only_the_moving_region_changes_nothing(tmp_path, monkeypatch):
+    # A mouth that moves a little: the flow exceeds the store's cut-off only near the mouth.
+    bank = Bank.load(synthetic.write_bank(tmp_path / "b", {"X": (30.0, 4.0), "Y": (31.0, 5.5)}))
+    r = Renderer(bank)
+    roi = r._pair("X", "Y").roi
+    whole = render_mod.Crop(0, bank.shape[0], 0, bank.shape[1])
+    frame = r.render("X", "Y", 0.5).copy()
+    monkeypatch.setattr(render_mod, "_union", lambda boxes, shape, margin: whole)
+    full = Renderer(bank).render("X", "Y", 0.5)
+    assert (roi.y1 - roi.y0) * (roi.x1 - roi.x0) < 0.5 * bank.shape[0] * bank.shape[1]
+    # outside the box the flow is below 0.1 px: at most a level or two on the eyes' edges
+    assert np.abs(frame.astype(int) - full.astype(int)).max() <= 8
+    assert np.mean(frame != full) < 0.01
+    outside = np.ones(bank.shape, bool)
+    outside[roi.y0:roi.y1, roi.x0:roi.x1] = False
+    np.testing.assert_array_equal(frame[outside], bank.images["X"][outside])
+
+
+def test_morph_public_function_and_errors(bank):
+    f = morph(bank, "X", "E", 0.5)
+    assert f.shape == bank.images["X"].shape and f.dtype == np.uint8
+    assert not np.array_equal(f, bank.images["X"]) and not np.array_equal(f, bank.images["E"])
+    with pytest.raises(InputError, match="unknown viseme 'Q'"):
+        morph(bank, "X", "Q", 0.5)
+    with pytest.raises(InputError, match="alpha"):
+        morph(bank, "X", "E", 1.5)
+    with pytest.raises(InputError, match="valid: flow, splat, beier-neely, dissolve"):
+        morph(bank, "X", "E", 0.5, method="optical")
+
+
+def test_cli_morph_frame_strip_and_preview(bank, tmp_path):
+    def run(*args):
+        return subprocess.run([sys.executable, "-m", "lipsync", *args], capture_output=True, text=True)
+
+    frame = tmp_path / "f.png"
+    r = run("morph", str(bank.path), "X", "O", "--alpha", "0.5", "-o", str(frame))
+    assert r.returncode == 0, r.stderr
+    got = cv2.cvtColor(cv2.imread(str(frame)), cv2.COLOR_BGR2RGB)
+    np.testing.assert_array_equal(got, morph(bank, "X", "O", 0.5))
+    strip = tmp_path / "s.png"
+    assert run("morph", str(bank.path), "X", "O", "--frames", "5", "-o", str(strip)).returncode == 0
+    s = cv2.imread(str(strip))
+    assert s.shape[1] > s.shape[0] > 100  # a wide strip: 5 columns, 3 rows
+    sheet = tmp_path / "p.png"
+    assert run("preview", str(bank.path), "-o", str(sheet)).returncode == 0
+    assert cv2.imread(str(sheet)) is not None
+    bad = run("morph", str(bank.path), "X", "Q", "--alpha", "0.5", "-o", str(frame))
+    assert bad.returncode == 2 and "unknown viseme 'Q'" in bad.stderr
