@@ -642,7 +642,7 @@ def control_lines(v: dict) -> dict:
     lines["nose"] = ((AXIS, 262.0), (AXIS, 302.0))
     lines["nostrils"] = ((AXIS - 12.5, 308.0), (AXIS + 12.5, 308.0))
     # The shirt's neckline: holds the neck and shirt still under a moving chin.
-    lines["collar"] = ((AXIS - 75.0, 472.0), (AXIS + 75.0, 472.0))
+    lines["collar"] = ((AXIS - 106.0, 473.0), (AXIS + 106.0, 473.0))
     return lines
 
 
