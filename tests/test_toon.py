@@ -127,7 +127,7 @@ def test_the_shapes_differ_in_the_mouth(images):
             assert changed.sum() > 300, (a, b)
 
 
-def test_open_shapes_are_dark_inside_and_closed_ones_are_not(images, bank):
+def test_open_shapes_are_dark_inside_and_closed_ones_are_not(images):
     def darkest_share(name):
         crop = images[name][MOUTH_ROWS, MOUTH_COLS]
         return float((crop.max(axis=2) < 90).mean())
