@@ -25,12 +25,11 @@ from typing import Iterator, List, Optional, Union
 import numpy as np
 
 from .bank import Bank
-from .errors import InputError
-from .phonemes import DEFAULT_MAP, PhonemeMap, canonical_viseme_timeline, check_map_against, load_map, map_timeline
+from .phonemes import DEFAULT_MAP, PhonemeMap, bank_viseme_timeline, load_map
 from .render import Renderer
 from .sequencer import FrameSpec, check_fps, sequence
 from .store import FlowStore
-from .timeline import VISEME, Timeline, read_timeline
+from .timeline import Timeline, read_timeline
 from .timing import DEFAULT_CURVE
 
 
@@ -76,17 +75,9 @@ class Animator:
                                      sample_rate=getattr(o, "sample_rate", 16000),
                                      fps=getattr(o, "moho_fps", 24.0))
         pmap = map if isinstance(map, PhonemeMap) else load_map(map or DEFAULT_MAP)
-        if timeline.kind == VISEME:
-            timeline = canonical_viseme_timeline(timeline, pmap)
-        names = check_map_against(pmap, self.bank.names)
-        pmap = pmap.renamed(names)
-        if timeline.kind == VISEME:
-            timeline = timeline.replace(segments=tuple(
-                type(s)(s.start, s.end, names.get(s.label, s.label)) for s in timeline))
-            unknown = sorted({s.label for s in timeline} - set(self.bank.names))
-            if unknown:
-                raise InputError(f"visemes not in the bank: {', '.join(unknown)}", path=timeline.path)
-        self.visemes = map_timeline(timeline, pmap, rest=self.bank.rest)
+        map_path = map if isinstance(map, (str, os.PathLike)) and os.path.isfile(map) else None
+        self.visemes, pmap = bank_viseme_timeline(timeline, pmap, self.bank.names, rest=self.bank.rest,
+                                                  map_path=map_path)
         self.specs: List[FrameSpec] = sequence(self.visemes, fps=self.fps, rest=self.bank.rest, timing=timing,
                                                closures=pmap.closures)
         self.renderer = Renderer(self.bank, method=method, store=store)

@@ -48,9 +48,9 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def _show_warning(message, category, filename, lineno, file=None, line=None):
+def _format_warning(message, category, filename, lineno, line=None):
     # Users see "lipsync: warning: <what>", not Python's source location.
-    print(f"lipsync: warning: {message}", file=file or sys.stderr)
+    return f"lipsync: warning: {message}\n"
 
 
 def main(argv: Optional[List[str]] = None) -> int:
@@ -62,8 +62,8 @@ def main(argv: Optional[List[str]] = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     func: Callable[[argparse.Namespace], int] = args.func
-    saved = warnings.showwarning
-    warnings.showwarning = _show_warning
+    saved = warnings.formatwarning
+    warnings.formatwarning = _format_warning
     try:
         return int(func(args) or 0)
     except InputError as exc:
@@ -78,7 +78,7 @@ def main(argv: Optional[List[str]] = None) -> int:
         print(f"lipsync: error: {exc}", file=sys.stderr)
         return EXIT_FAILURE
     finally:
-        warnings.showwarning = saved
+        warnings.formatwarning = saved
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -33,9 +33,9 @@ from typing import Dict, Iterable, List, Mapping, Optional, Sequence, Tuple, Uni
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from ._data import data_dir
-from .errors import InputError, MapError, UnknownNameError
+from .errors import MapError, TimelineError, UnknownNameError
 from .registry import Registry
-from .timeline import PHONEME, VISEME, Segment, Timeline
+from .timeline import VISEME, Segment, Timeline
 
 PathLike = Union[str, "os.PathLike[str]"]
 
@@ -491,3 +491,55 @@ def canonical_viseme_timeline(timeline: Timeline, pmap: PhonemeMap) -> Timeline:
             reverse.setdefault(a.lower(), v)
     segs = tuple(Segment(s.start, s.end, reverse.get(s.label.lower(), s.label)) for s in timeline)
     return timeline.replace(segments=segs)
+
+
+def bank_viseme_timeline(timeline: Timeline, pmap: PhonemeMap, viseme_names: Optional[Iterable[str]] = None, *,
+                         rest: Optional[str] = None, map_path: Optional[PathLike] = None
+                         ) -> Tuple[Timeline, PhonemeMap]:
+    """Map any timeline to a bank's visemes: the one place phoneme and viseme files meet a bank.
+
+    Phoneme timelines go through the map; viseme timelines (Rhubarb, Moho) have their
+    labels translated to the map's own names (:func:`canonical_viseme_timeline`). With
+    ``viseme_names`` the map's visemes are matched to the bank's (through aliases, e.g.
+    Preston Blair names) and the map is renamed to them.
+
+    Parameters
+    ----------
+    timeline : Timeline
+        As read by :func:`lipsync.timeline.read_timeline`.
+    pmap : PhonemeMap
+        The phoneme-to-viseme map.
+    viseme_names : iterable of str, optional
+        The bank's visemes; a map viseme or timeline viseme the bank lacks is an error.
+    rest : str, optional
+        The viseme for silence and gaps (default: the map's silence viseme).
+    map_path : path-like, optional
+        The map's file, named in errors.
+
+    Returns
+    -------
+    (Timeline, PhonemeMap)
+        The viseme timeline covering the whole file, and the map in the bank's names (its
+        ``closures`` are what :func:`lipsync.sequencer.sequence` wants).
+
+    Examples
+    --------
+    >>> from lipsync.timeline import Segment, Timeline
+    >>> tl = Timeline((Segment(0, 0.2, "M"), Segment(0.2, 0.5, "AA")), kind="phoneme")
+    >>> vt, m = bank_viseme_timeline(tl, load_map("rhubarb"), "ABCDEFGHX", rest="X")
+    >>> vt.labels(), m.closures
+    (['A', 'D'], ['A'])
+    """
+    if timeline.kind == VISEME:
+        timeline = canonical_viseme_timeline(timeline, pmap)
+    if viseme_names is not None:
+        bank = list(viseme_names)
+        names = check_map_against(pmap, bank, path=map_path)
+        pmap = pmap.renamed(names)
+        if timeline.kind == VISEME:
+            timeline = timeline.replace(segments=tuple(
+                Segment(s.start, s.end, names.get(s.label, s.label)) for s in timeline))
+            unknown = sorted({s.label for s in timeline} - set(bank))
+            if unknown:
+                raise TimelineError(f"visemes not in the bank: {', '.join(unknown)}", path=timeline.path)
+    return map_timeline(timeline, pmap, rest=rest), pmap

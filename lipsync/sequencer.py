@@ -45,7 +45,7 @@ from typing import Iterable, List, Optional, Sequence, Tuple, Union
 import numpy as np
 
 from .errors import InputError
-from .timeline import VISEME, Segment, Timeline
+from .timeline import VISEME, Timeline
 from .timing import DEFAULT_CURVE, Curve, get_curve
 
 # --- tuning constants (seconds) -------------------------------------------------------------

@@ -20,10 +20,9 @@ import os
 import sys
 from typing import Iterable, Optional, Tuple
 
-from .phonemes import (DEFAULT_MAP, MAPS, PhonemeMap, canonical_viseme_timeline, check_map_against,
-                       load_map, map_timeline)
+from .phonemes import DEFAULT_MAP, MAPS, PhonemeMap, bank_viseme_timeline, load_map
 from .sequencer import FPS_RANGE, describe, plan_segments, sequence
-from .timeline import READERS, VISEME, Timeline, read_timeline
+from .timeline import READERS, Timeline, read_timeline
 from .timing import CURVES, DEFAULT_CURVE
 
 DEFAULT_FPS = 24.0
@@ -88,22 +87,10 @@ def load_viseme_timeline(args: argparse.Namespace, *, rest: Optional[str] = None
                              tier=getattr(args, "tier", None),
                              sample_rate=getattr(args, "sample_rate", 16000),
                              fps=getattr(args, "moho_fps", DEFAULT_MOHO_FPS))
-    if timeline.kind == VISEME:
-        timeline = canonical_viseme_timeline(timeline, pmap)
-    if viseme_names is not None:
-        map_arg = str(getattr(args, "map", None) or "")
-        names = check_map_against(pmap, viseme_names, path=map_arg if os.path.isfile(map_arg) else None)
-        pmap = pmap.renamed(names)
-        if timeline.kind == VISEME:
-            timeline = timeline.replace(segments=tuple(
-                type(s)(s.start, s.end, names.get(s.label, s.label)) for s in timeline))
-            bank = set(viseme_names)
-            unknown = sorted({s.label for s in timeline if s.label not in bank})
-            if unknown:
-                from .errors import TimelineError
+    map_arg = str(getattr(args, "map", None) or "")
+    return bank_viseme_timeline(timeline, pmap, viseme_names, rest=rest,
+                                map_path=map_arg if os.path.isfile(map_arg) else None)
 
-                raise TimelineError(f"visemes not in the bank: {', '.join(unknown)}", path=timeline.path)
-    return map_timeline(timeline, pmap, rest=rest), pmap
 
 
 def add_parser(subparsers) -> argparse.ArgumentParser:
