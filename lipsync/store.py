@@ -7,9 +7,11 @@ editing one viseme changes only the keys of the pairs that involve it.
 
 Storage, per entry (``<store>/flows/<key>.npz``, an uncompressed numpy zip):
 
-* each field is cropped to the box where its displacement exceeds :data:`CROP_EPS` (flows
-  vanish away from the mouth because static anchor lines hold the rest of the face), the
-  box made symmetric about the axis when the lines are, and then only its left half kept;
+* each field first loses a dead zone: displacements are shrunk by :data:`FLOW_DEADZONE`
+  px (``d * max(0, 1 - deadzone / |d|)``, continuous, so no seam), which makes the static
+  parts of the face exactly still;
+* each field is cropped to the box where its displacement is non-zero, the box made
+  symmetric about the axis when the lines are, and then only its left half kept;
 * values are float16 displacements: for |d| < 64 px the rounding error is at most
   2**-11 * |d| <= 0.031 px (<= 0.004 px for |d| < 8 px), well under bilinear sampling's
   own error, at half the bytes of float32;
@@ -40,12 +42,16 @@ import numpy as np
 from .bank import Bank
 
 #: Bump when the flow computation or the entry layout changes: old entries become misses.
-FORMAT_VERSION = 2
-#: Displacements below this (px) are stored as zero: 1/64 px moves no edge by a visible
-#: amount after bilinear sampling to 8 bits. (Beier-Neely weights fall off only as
-#: 1/dist^2, so fields rarely vanish entirely; the renderer limits its work by what a
-#: displacement would visibly change instead, see lipsync.render.ROI_LEVEL.)
-CROP_EPS = 1.0 / 64
+FORMAT_VERSION = 3
+#: Every stored displacement is shrunk by this many pixels (and so is zero below it).
+#: Beier-Neely weights fall off only as 1/dist^b, so a moving mouth drags the whole face
+#: by tenths of a pixel: motion nobody wants (the anchors are there to hold the face
+#: still) that would also force the renderer to redraw the whole frame. A quarter pixel
+#: is below what a viewer sees as motion; shrinking (rather than cutting) keeps the
+#: field continuous, so no seam appears where it reaches zero.
+FLOW_DEADZONE = 0.25
+#: Displacements at or below this (px) after the dead zone count as zero for cropping.
+CROP_EPS = 1e-6
 _ZIP_TIME = (2000, 1, 1, 0, 0, 0)
 _TMP_PREFIX = ".tmp-"
 
@@ -94,6 +100,20 @@ def support_box(field: np.ndarray, axis: Optional[float], eps: float = None) -> 
         if lo >= 0 and hi < w:
             x0, x1 = lo, hi + 1
     return Crop(y0, y1, x0, x1)
+
+
+def apply_deadzone(field: np.ndarray, deadzone: Optional[float] = None) -> np.ndarray:
+    """Shrink every displacement by ``deadzone`` px: ``d * max(0, 1 - deadzone / |d|)``.
+
+    Examples
+    --------
+    >>> apply_deadzone(np.array([[[3.0, 4.0], [0.1, 0.0]]], np.float32), 0.5)[0].tolist()
+    [[2.700000047683716, 3.5999999046325684], [0.0, 0.0]]
+    """
+    deadzone = FLOW_DEADZONE if deadzone is None else deadzone
+    mag = np.hypot(field[..., 0], field[..., 1])
+    scale = np.maximum(mag - deadzone, 0.0) / np.maximum(mag, 1e-12)
+    return (field * scale[..., None]).astype(np.float32)
 
 
 def _npy_bytes(arr: np.ndarray) -> bytes:
@@ -266,11 +286,12 @@ class FlowStore:
     # ----------------------------------------------------------------------- pairs
     def put_pair(self, key: str, forward: np.ndarray, backward: np.ndarray, *, axis: Optional[float],
                  names: Tuple[str, str] = ("", "")) -> int:
-        """Store a pair's flows under ``key``; returns the entry's size in bytes."""
+        """Store a pair's flows under ``key`` (after the dead zone); returns the entry's size in bytes."""
         arrays: Dict[str, np.ndarray] = {}
         meta: dict = {"key": key, "kind": "pair", "names": list(names), "shape": list(forward.shape[:2]),
-                      "axis": axis}
+                      "axis": axis, "deadzone": FLOW_DEADZONE}
         for name, field in (("forward", forward), ("backward", backward)):
+            field = apply_deadzone(field)
             crop = support_box(field, axis)
             part = field[crop.y0:crop.y1, crop.x0:crop.x1]
             half = None

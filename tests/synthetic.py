@@ -65,6 +65,11 @@ def lines(rx: float, ry: float) -> Dict[str, Tuple[Tuple[float, float], Tuple[fl
         "eye_l": ((cx - 48, 40.0), (cx - 32, 40.0)),
         "eye_r": ((cx + 48, 40.0), (cx + 32, 40.0)),
         "chin": ((cx - 30, 150.0), (cx + 30, 150.0)),
+        # static anchors near the image edges, as a real bank's face outline: they keep
+        # the flow near zero away from the mouth
+        "brow": ((cx - 60, 15.0), (cx + 60, 15.0)),
+        "cheek_l": ((cx - 85, 40.0), (cx - 85, 140.0)),
+        "cheek_r": ((cx + 85, 40.0), (cx + 85, 140.0)),
     }
     return {n: (tuple(map(float, p)), tuple(map(float, q))) for n, (p, q) in out.items()}
 
