@@ -196,9 +196,15 @@ def _read_yaml(yaml_path: Path):
     except OSError as exc:
         raise BankError(f"cannot read: {exc.strerror}", path=yaml_path) from None
     try:
-        # compose first to keep line numbers for error messages; safe_load refuses custom tags.
-        root = yaml.compose(text, Loader=yaml.SafeLoader)
-        data = yaml.safe_load(text)
+        # One parse: compose the node tree (it keeps line numbers for error messages), then
+        # build plain data from it. SafeLoader refuses custom tags; libyaml's C loader is
+        # ~10x faster when PyYAML was built with it.
+        loader = getattr(yaml, "CSafeLoader", yaml.SafeLoader)(text)
+        try:
+            root = loader.get_single_node()
+            data = loader.construct_document(root) if root is not None else None
+        finally:
+            loader.dispose()
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         problem = getattr(exc, "problem", None) or str(exc).splitlines()[0]
@@ -216,14 +222,19 @@ def _read_image(path: Path, where: str, yaml_path: Path, line: Optional[int]) ->
         size = path.stat().st_size
     except OSError:
         raise BankError(f"{where}: image {path.name!r} does not exist", path=yaml_path, line=line) from None
-    header = _png_size(path)
+    if not path.is_file():  # found by fuzzing: "image: ." reached np.fromfile and raised IsADirectoryError
+        raise BankError(f"{where}: image path {path.name!r} is not a file", path=yaml_path, line=line)
+    header = _png_size(path) or _jpeg_size(path)
     if header is not None and header[0] * header[1] > MAX_IMAGE_PIXELS:
         raise BankError(f"{where}: image {path.name!r} is {header[0]}x{header[1]}, above the limit of "
                         f"{MAX_IMAGE_PIXELS} pixels", path=yaml_path, line=line)
     if size > 4 * MAX_IMAGE_PIXELS:
         raise BankError(f"{where}: image file {path.name!r} is {size} bytes, too large", path=yaml_path, line=line)
     data = np.fromfile(str(path), dtype=np.uint8)
-    img = cv2.imdecode(data, cv2.IMREAD_UNCHANGED) if data.size else None
+    try:
+        img = cv2.imdecode(data, cv2.IMREAD_UNCHANGED) if data.size else None
+    except cv2.error:  # OpenCV's own size limit (2**30 pixels) raises instead of returning None
+        img = None
     if img is None:
         raise BankError(f"{where}: cannot decode image {path.name!r}", path=yaml_path, line=line)
     if img.shape[0] * img.shape[1] > MAX_IMAGE_PIXELS:
@@ -239,6 +250,47 @@ def _read_image(path: Path, where: str, yaml_path: Path, line: Optional[int]) ->
     else:
         img = cv2.cvtColor(img, cv2.COLOR_BGR2RGB)
     return np.ascontiguousarray(img)
+
+
+def _jpeg_size(path: Path) -> Optional[Tuple[int, int]]:
+    """(width, height) from a JPEG's frame header without decoding, or None if not found.
+
+    Found by fuzzing: a 629-byte JPEG whose header claims 30000x30000 made OpenCV allocate
+    and fill 2.7 GB before the pixel limit below could refuse it.
+    """
+    try:
+        with open(path, "rb") as fh:
+            if fh.read(2) != b"\xff\xd8":
+                return None
+            # Segments before the frame header are few (APPn, DQT, DHT); the bound stops junk.
+            for _ in range(_JPEG_MAX_SEGMENTS):
+                marker = fh.read(2)
+                while marker[:1] == b"\xff" and marker[1:2] == b"\xff":  # fill bytes
+                    marker = marker[1:] + fh.read(1)
+                if len(marker) < 2 or marker[0] != 0xFF:
+                    return None
+                kind = marker[1]
+                if kind in _JPEG_NO_LENGTH:
+                    continue
+                length = int.from_bytes(fh.read(2), "big")
+                if kind in _JPEG_SOF:
+                    head = fh.read(5)
+                    if len(head) < 5:
+                        return None
+                    return int.from_bytes(head[3:5], "big"), int.from_bytes(head[1:3], "big")
+                if kind == 0xDA or length < 2:  # scan data before any frame header: not a JPEG
+                    return None
+                fh.seek(length - 2, os.SEEK_CUR)
+    except OSError:
+        return None
+    return None
+
+
+_JPEG_MAX_SEGMENTS = 256
+#: Start-of-frame markers (baseline, progressive, lossless, arithmetic): they carry the size.
+_JPEG_SOF = frozenset([0xC0, 0xC1, 0xC2, 0xC3, 0xC5, 0xC6, 0xC7, 0xC9, 0xCA, 0xCB, 0xCD, 0xCE, 0xCF])
+#: Markers without a length field (restart markers, TEM, SOI).
+_JPEG_NO_LENGTH = frozenset(list(range(0xD0, 0xD8)) + [0x01, 0xD8])
 
 
 def _png_size(path: Path) -> Optional[Tuple[int, int]]:
@@ -330,7 +382,7 @@ def _load(path: Path) -> Bank:
         img_path = folder / rel
         try:
             real = img_path.resolve()
-        except (OSError, RuntimeError):
+        except (OSError, RuntimeError, ValueError):  # ValueError: a NUL byte in the path (fuzzing)
             fail(f"viseme {v!r}: cannot resolve image path {rel!r}", keys)
         if folder_real != real and folder_real not in real.parents:
             fail(f"viseme {v!r}: image path {rel!r} leads outside the bank folder", keys)

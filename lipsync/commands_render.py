@@ -42,6 +42,76 @@ def add_parser(sub) -> None:
     p.set_defaults(func=run)
 
 
+#: Frames rendered ahead of the encoder. A few are enough to keep both busy; each is one
+#: frame of memory (0.8 MB at 512x512), so memory stays flat however long the clip.
+QUEUE_FRAMES = 8
+
+
+def write_overlapped(frames, write) -> None:
+    """Feed ``frames`` to ``write`` from a second thread, so rendering overlaps encoding.
+
+    Writing blocks while ffmpeg encodes; OpenCV, numpy and the pipe write all release the
+    GIL, so the renderer keeps working meanwhile. Frames are copied into a ring of
+    :data:`QUEUE_FRAMES` buffers (the renderer reuses its own). An error in the writer
+    stops the renderer and is re-raised here; an error in the renderer stops the writer.
+    """
+    import queue
+    import threading
+
+    import numpy as np
+
+    q: "queue.Queue" = queue.Queue(maxsize=QUEUE_FRAMES - 2)
+    free: "queue.Queue" = queue.Queue()
+    failure: list = []
+    stop = threading.Event()
+
+    def consume():
+        try:
+            while True:
+                buf = q.get()
+                if buf is None:
+                    return
+                write(buf)
+                free.put(buf)
+        except BaseException as exc:  # handed to the main thread
+            failure.append(exc)
+            stop.set()
+
+    worker = threading.Thread(target=consume, name="lipsync-encode", daemon=True)
+    worker.start()
+
+    def hand_over(item) -> bool:
+        # put, but give up if the writer has died (its queue would never drain)
+        while worker.is_alive():
+            try:
+                q.put(item, timeout=0.1)
+                return True
+            except queue.Full:
+                continue
+        return False
+
+    made = 0
+    try:
+        for frame in frames:
+            if stop.is_set():
+                break
+            buf = None
+            while buf is None and not stop.is_set():
+                try:
+                    buf = free.get(timeout=0.1) if made >= QUEUE_FRAMES else free.get_nowait()
+                except queue.Empty:
+                    if made < QUEUE_FRAMES:
+                        buf = np.empty_like(frame)
+                        made += 1
+            if buf is None or not hand_over(np.copyto(buf, frame) or buf):
+                break
+    finally:
+        hand_over(None)
+        worker.join()
+    if failure:
+        raise failure[0]
+
+
 def run(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
@@ -67,9 +137,9 @@ def run(args: argparse.Namespace) -> int:
     t1 = time.perf_counter()
     with open_writer(args.output, fps=args.fps, size=(w, h), format=out_format, audio=args.audio,
                      crf=args.crf, preset=args.preset, quiet=True) as writer:
-        for frame in tqdm(anim.frames(copy=False), total=len(anim), desc="render", unit="frame",
-                          disable=args.quiet, leave=False):
-            writer.write(frame)
+        frames = tqdm(anim.frames(copy=False), total=len(anim), desc="render", unit="frame",
+                      disable=args.quiet, leave=False)
+        write_overlapped(frames, writer.write)
     t2 = time.perf_counter()
     if not args.quiet:
         seconds = len(anim) / args.fps

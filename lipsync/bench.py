@@ -1,0 +1,289 @@
+"""``make bench`` / ``python -m lipsync.bench``: every speed figure, measured side by side.
+
+Prints a table and writes ``bench/results.json``:
+
+1. one Beier-Neely field (30 random lines) at 512x512 and 1280x720: ms and peak extra
+   memory of :func:`lipsync.warp.beier_neely_map` against a naive full-broadcast numpy
+   version of the same formulas; the speed-up from symmetric halving;
+2. ms per frame of each render method on the default subject at 512x512 and scaled to
+   1280x720; beier-neely / flow; flow against a plain memory copy of the bytes a flow
+   frame reads and writes (two images and two flows in, one frame out);
+3. ``lipsync render`` end to end (render + H.264/AAC encode) of the 26.7 s MFA recording
+   as a multiple of real time, flows cached, at 512x512 and 1280x720;
+4. flow store bytes per field pixel.
+
+Timings are the median of repeated runs after a warm-up. Nothing here is asserted: the
+test suite checks correctness, this prints the numbers.
+"""
+
+from __future__ import annotations
+
+import argparse
+import gc
+import json
+import os
+import shutil
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+import tracemalloc
+from pathlib import Path
+from typing import Callable, Dict, List
+
+import numpy as np
+
+from ._data import default_bank_dir
+
+
+def _median_ms(fn: Callable[[], object], repeat: int, warmup: int = 1) -> float:
+    for _ in range(warmup):
+        fn()
+    times = []
+    for _ in range(repeat):
+        t = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t)
+    return statistics.median(times) * 1e3
+
+
+def _peak_mb(fn: Callable[[], object]) -> float:
+    gc.collect()
+    tracemalloc.start()
+    try:
+        result = fn()
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    # the returned map itself (H x W x 2 float32) is output, not working memory
+    out = getattr(result, "nbytes", 0)
+    return max(0.0, (peak - out) / 1e6)
+
+
+def naive_beier_neely_map(shape, dst, src, a=1.0, b=2.0, p=0.5) -> np.ndarray:
+    """DESIGN.md's formulas broadcast over (lines, H, W) at once: the obvious numpy version."""
+    h, w = shape
+    dst = np.asarray(dst, np.float64)[:, :, :, None, None]
+    src = np.asarray(src, np.float64)[:, :, :, None, None]
+    ys, xs = np.mgrid[0:h, 0:w].astype(np.float64)
+    P, Q, Ps, Qs = dst[:, 0], dst[:, 1], src[:, 0], src[:, 1]
+    e, es = Q - P, Qs - Ps
+    dx, dy = xs - P[:, 0], ys - P[:, 1]
+    len2 = e[:, 0] ** 2 + e[:, 1] ** 2
+    length = np.sqrt(len2)
+    u = (dx * e[:, 0] + dy * e[:, 1]) / len2
+    v = (dx * -e[:, 1] + dy * e[:, 0]) / length
+    lens = np.sqrt(es[:, 0] ** 2 + es[:, 1] ** 2)
+    xp = Ps[:, 0] + u * es[:, 0] + v * -es[:, 1] / lens
+    yp = Ps[:, 1] + u * es[:, 1] + v * es[:, 0] / lens
+    dist = np.where(u < 0, np.hypot(dx, dy), np.where(u > 1, np.hypot(xs - Q[:, 0], ys - Q[:, 1]), np.abs(v)))
+    weight = (length ** p / (a + dist)) ** b
+    wsum = weight.sum(axis=0)
+    out = np.empty((h, w, 2), np.float32)
+    out[..., 0] = xs + (weight * (xp - xs)).sum(axis=0) / wsum
+    out[..., 1] = ys + (weight * (yp - ys)).sum(axis=0) / wsum
+    return out
+
+
+def _random_symmetric_lines(shape, n, rng):
+    """``n`` lines mirror-symmetric about the image's centre column (pairs plus one on the axis)."""
+    h, w = shape
+    axis = (w - 1) / 2
+    half = rng.uniform([0.1 * w, 0.1 * h], [0.48 * w, 0.9 * h], size=((n - 1) // 2, 2, 2))
+    mirror = half.copy()
+    mirror[..., 0] = 2 * axis - mirror[..., 0]
+    lines = [half, mirror]
+    if n % 2:
+        lines.append(np.array([[[axis, 0.2 * h], [axis, 0.8 * h]]]))
+    out = np.concatenate(lines)
+    names = [f"l{i}_l" for i in range(len(half))] + [f"l{i}_r" for i in range(len(half))] + ["mid"] * (n % 2)
+    return out, names, axis
+
+
+def bench_field(rows: List[dict], quick: bool) -> None:
+    from .bank import WarpParams
+    from .flows import flow_field
+    from .warp import beier_neely_map
+
+    rng = np.random.default_rng(0)
+    for shape in ((512, 512), (720, 1280)):
+        dst, names, axis = _random_symmetric_lines(shape, 30, rng)
+        src = dst + rng.normal(0, 3, dst.shape)
+        src_sym = dst.copy()
+        src_sym[: len(dst) // 2, :, 1] += 3.0  # symmetric motion: move each pair the same way
+        src_sym[len(dst) // 2 : 2 * (len(dst) // 2), :, 1] += 3.0
+        rep = 3 if quick else 7
+        ms = _median_ms(lambda: beier_neely_map(shape, dst_lines=dst, src_lines=src), rep)
+        mem = _peak_mb(lambda: beier_neely_map(shape, dst_lines=dst, src_lines=src))
+        naive_ms = _median_ms(lambda: naive_beier_neely_map(shape, dst, src), 1 if quick else 3, warmup=0)
+        naive_mem = _peak_mb(lambda: naive_beier_neely_map(shape, dst, src))
+        w = WarpParams()
+        full_ms = _median_ms(lambda: flow_field(shape, dst, src_sym, w), rep)
+        half_ms = _median_ms(lambda: flow_field(shape, dst, src_sym, w, axis=axis), rep)
+        px = shape[0] * shape[1]
+        rows.append({
+            "figure": "beier_neely_field", "size": f"{shape[1]}x{shape[0]}", "lines": 30,
+            "ms": round(ms, 1), "ns_per_pixel_line": round(ms * 1e6 / px / 30, 2), "peak_mb": round(mem, 1),
+            "naive_ms": round(naive_ms, 1), "naive_peak_mb": round(naive_mem, 1),
+            "speedup_vs_naive": round(naive_ms / ms, 1), "memory_ratio": round(mem / naive_mem, 4),
+            "symmetric_full_ms": round(full_ms, 1), "symmetric_half_ms": round(half_ms, 1),
+            "halving_speedup": round(full_ms / half_ms, 2),
+        })
+
+
+def _scaled_bank(src_dir: Path, out_dir: Path, size) -> Path:
+    """The default subject placed on a ``size`` = (W, H) canvas (scaled to its height)."""
+    import cv2
+    import yaml
+
+    spec = yaml.safe_load((src_dir / "bank.yaml").read_text())
+    W, H = size
+    out_dir.mkdir(parents=True, exist_ok=True)
+    for name, v in spec["visemes"].items():
+        img = cv2.imread(str(src_dir / v["image"]))
+        s = H / img.shape[0]
+        img = cv2.resize(img, (round(img.shape[1] * s), H), interpolation=cv2.INTER_CUBIC)
+        pad = (W - img.shape[1]) // 2
+        img = cv2.copyMakeBorder(img, 0, 0, pad, W - img.shape[1] - pad, cv2.BORDER_REPLICATE)
+        cv2.imwrite(str(out_dir / v["image"]), img)
+        # pixel centres: x' = (x + 0.5) * s - 0.5 + pad keeps the mirror axis on the centre
+        v["lines"] = {n: [[(x + 0.5) * s - 0.5 + pad, (y + 0.5) * s - 0.5] for x, y in line]
+                      for n, line in v["lines"].items()}
+    (out_dir / "bank.yaml").write_text(yaml.safe_dump(spec, sort_keys=False))
+    return out_dir
+
+
+def bench_methods(rows: List[dict], banks: Dict[str, Path], quick: bool) -> None:
+    from .bank import Bank
+    from .preprocess import preprocess
+    from .render import METHODS, Renderer
+    from .store import FlowStore
+
+    pairs = [("X", "D"), ("A", "C"), ("B", "F"), ("E", "H")]
+    for label, path in banks.items():
+        bank = Bank.load(path)
+        store = FlowStore.for_bank(bank)
+        preprocess(bank, store=store, quiet=True)
+        row = {"figure": "frame", "size": label, "lines": len(bank.line_names)}
+        for method in METHODS.names():
+            r = Renderer(bank, method=method, store=store)
+            alphas = np.linspace(0.1, 0.9, 3 if (quick or method == "beier-neely") else 9)
+
+            def frames():
+                for a, b in pairs:
+                    for al in alphas:
+                        r.render(a, b, float(al))
+
+            frames()  # warm-up: pair states and buffers
+            n = len(pairs) * len(alphas)
+            row[f"{method}_ms"] = round(_median_ms(frames, 1 if method == "beier-neely" else 3, warmup=0) / n, 3)
+        # the bytes one flow frame reads and writes: two images and two flows in, one frame out
+        img = bank.images[bank.names[0]]
+        flows = store.get_pair(bank, "X", "D")
+        f16 = [np.zeros(img.shape[:2] + (2,), np.float16) for _ in flows]
+        srcs = [img, img.copy()] + f16
+        dsts = [np.empty_like(s) for s in srcs]
+        out = np.empty_like(img)
+
+        def copy_bytes():
+            for s, d in zip(srcs, dsts):
+                np.copyto(d, s)
+            np.copyto(out, img)
+
+        row["memcpy_ms"] = round(_median_ms(copy_bytes, 50), 3)
+        row["beier_neely_over_flow"] = round(row["beier-neely_ms"] / row["flow_ms"], 1)
+        row["flow_over_memcpy"] = round(row["flow_ms"] / row["memcpy_ms"], 1)
+        rows.append(row)
+
+
+def bench_end_to_end(rows: List[dict], banks: Dict[str, Path], timeline: Path, audio: Path) -> None:
+    import wave
+
+    with wave.open(str(audio)) as wf:
+        seconds = wf.getnframes() / wf.getframerate()
+    for label, path in banks.items():
+        with tempfile.TemporaryDirectory() as tmp:
+            out = Path(tmp) / "out.mp4"
+            cmd = [sys.executable, "-m", "lipsync", "render", str(timeline), "--audio", str(audio), "--bank",
+                   str(path), "-o", str(out), "--quiet"]
+            subprocess.run(cmd, check=True)  # warm: flows cached, files in the page cache
+            t = time.perf_counter()
+            subprocess.run(cmd, check=True)
+            wall = time.perf_counter() - t
+        rows.append({"figure": "end_to_end", "size": label, "audio_s": round(seconds, 2), "wall_s": round(wall, 2),
+                     "x_real_time": round(seconds / wall, 1)})
+
+
+def bench_store(rows: List[dict], banks: Dict[str, Path]) -> None:
+    from .bank import Bank
+    from .preprocess import all_pairs
+    from .store import FlowStore
+
+    for label, path in banks.items():
+        bank = Bank.load(path)
+        store = FlowStore.for_bank(bank)
+        flows = sorted((store.root / "flows").glob("*.npz"))
+        n_fields = 2 * len(all_pairs(bank.names))
+        total = sum(p.stat().st_size for p in flows)
+        h, w = bank.shape
+        rows.append({"figure": "store", "size": label, "entries": len(flows),
+                     "bytes": total, "bytes_per_field_pixel": round(total / (n_fields * h * w), 3),
+                     "float32_full_bytes_per_field_pixel": 8})
+
+
+def _table(rows: List[dict]) -> str:
+    lines = []
+    for fig in ("beier_neely_field", "frame", "end_to_end", "store"):
+        sel = [r for r in rows if r["figure"] == fig]
+        if not sel:
+            continue
+        keys = [k for k in sel[0] if k != "figure"]
+        widths = [max(len(k), *(len(str(r.get(k, ""))) for r in sel)) for k in keys]
+        lines.append(f"\n## {fig}")
+        lines.append("  ".join(k.ljust(w) for k, w in zip(keys, widths)))
+        for r in sel:
+            lines.append("  ".join(str(r.get(k, "")).ljust(w) for k, w in zip(keys, widths)))
+    return "\n".join(lines)
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m lipsync.bench", description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="fewer repeats (a smoke run)")
+    parser.add_argument("--json", default="bench/results.json", help="where to write the results")
+    args = parser.parse_args(argv)
+    root = Path(__file__).resolve().parent.parent
+    conformance = root.parent / "shared" / "conformance" / "mfa"
+    if not conformance.is_dir():
+        conformance = root / "tests" / "data" / "conformance" / "mfa"
+    timeline, audio = conformance / "acoustic_corpus.TextGrid", conformance / "acoustic_corpus.wav"
+
+    rows: List[dict] = []
+    t0 = time.perf_counter()
+    with tempfile.TemporaryDirectory() as tmp:
+        banks = {"512x512": Path(tmp) / "toon512", "1280x720": Path(tmp) / "toon720"}
+        shutil.copytree(default_bank_dir(), banks["512x512"], ignore=shutil.ignore_patterns(".lipsync"))
+        _scaled_bank(default_bank_dir(), banks["1280x720"], (1280, 720))
+        print("beier-neely field ...", file=sys.stderr)
+        bench_field(rows, args.quick)
+        print("frames per method ...", file=sys.stderr)
+        bench_methods(rows, banks, args.quick)
+        if audio.exists():
+            print("end to end ...", file=sys.stderr)
+            bench_end_to_end(rows, banks, timeline, audio)
+        bench_store(rows, banks)
+    meta = {"cpu_count": os.cpu_count(), "seconds": round(time.perf_counter() - t0, 1),
+            "python": sys.version.split()[0], "numpy": np.__version__}
+    print(_table(rows))
+    print(f"\n(total {meta['seconds']} s on {meta['cpu_count']} cores)")
+    out = Path(args.json)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp_out = out.with_suffix(".json.tmp")
+    tmp_out.write_text(json.dumps({"meta": meta, "results": rows}, indent=2) + "\n")
+    os.replace(tmp_out, out)
+    print(f"wrote {out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
