@@ -1,0 +1,100 @@
+"""``lipsync render`` end to end: decode the mp4 and check what it shows, and when."""
+
+import subprocess
+import sys
+import wave
+
+import numpy as np
+import pytest
+
+import synthetic
+from lipsync import Animator, Bank, Segment, Timeline
+from lipsync.encode import probe
+
+FPS = 25
+# A literal viseme timeline (Rhubarb TSV: start<TAB>shape): holds of >= 200 ms and quick ones.
+CUES = [(0.00, "X"), (0.30, "D"), (0.62, "B"), (0.70, "F"), (1.00, "A"), (1.08, "C"), (1.40, "E"),
+        (1.70, "X")]
+END = 2.0
+
+
+@pytest.fixture(scope="module")
+def rhubarb_bank(tmp_path_factory):
+    return synthetic.write_bank(tmp_path_factory.mktemp("e2e") / "bank", synthetic.RHUBARB_SHAPES)
+
+
+def write_wav(path, seconds, rate=16000):
+    t = np.arange(int(seconds * rate)) / rate
+    samples = (0.3 * np.sin(2 * np.pi * 220 * t) * 32767).astype("<i2")
+    with wave.open(str(path), "wb") as wf:
+        wf.setnchannels(1)
+        wf.setsampwidth(2)
+        wf.setframerate(rate)
+        wf.writeframes(samples.tobytes())
+
+
+def decode(path):
+    import imageio_ffmpeg
+
+    gen = imageio_ffmpeg.read_frames(str(path))
+    meta = next(gen)
+    w, h = meta["size"]
+    return np.stack([np.frombuffer(f, np.uint8).reshape(h, w, 3) for f in gen])
+
+
+def test_render_mp4_shows_each_long_viseme_at_its_midpoint(rhubarb_bank, tmp_path):
+    tsv = tmp_path / "cues.tsv"
+    tsv.write_text("".join(f"{t:.2f}\t{v}\n" for t, v in CUES) + f"{END:.2f}\tX\n")
+    wav = tmp_path / "speech.wav"
+    write_wav(wav, END + 0.37)  # longer than the timeline: cut to the video's length
+    out = tmp_path / "out.mp4"
+    r = subprocess.run([sys.executable, "-m", "lipsync", "render", str(tsv), "--bank", str(rhubarb_bank),
+                        "--audio", str(wav), "--fps", str(FPS), "-o", str(out), "--quiet"],
+                       capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    info = probe(out)
+    n = int(np.ceil(END * FPS))
+    assert info["n_frames"] == n
+    assert info["streams"] == [("video", "h264"), ("audio", "aac")]
+    assert abs(info["audio_duration"] - info["video_duration"]) <= 1 / FPS
+    frames = decode(out)
+    assert len(frames) == n
+    bank = Bank.load(rhubarb_bank)
+    refs = {v: bank.images[v].astype(np.float32) for v in bank.names}
+    ends = [t for t, _ in CUES[1:]] + [END]
+    checked = 0
+    for (start, viseme), end in zip(CUES, ends):
+        if end - start < 0.2:
+            continue
+        frame = frames[int(round((start + end) / 2 * FPS))].astype(np.float32)
+        dist = {v: float(np.mean((frame - ref) ** 2)) for v, ref in refs.items()}
+        assert min(dist, key=dist.get) == viseme, (start, viseme, sorted(dist.items(), key=lambda kv: kv[1])[:3])
+        checked += 1
+    assert checked == 6
+
+
+def test_png_sequence_output(rhubarb_bank, tmp_path):
+    tsv = tmp_path / "cues.tsv"
+    tsv.write_text("0.00\tX\n0.30\tD\n0.60\tX\n")
+    out = tmp_path / "frames"
+    r = subprocess.run([sys.executable, "-m", "lipsync", "render", str(tsv), "--bank", str(rhubarb_bank),
+                        "--fps", "10", "--format", "png", "-o", str(out), "--quiet"], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    pngs = sorted(out.glob("*.png"))
+    assert len(pngs) == 6
+    import cv2
+
+    mid = cv2.cvtColor(cv2.imread(str(pngs[4])), cv2.COLOR_BGR2RGB)  # t = 0.4 s, inside the D hold
+    np.testing.assert_array_equal(mid, Bank.load(rhubarb_bank).images["D"])
+
+
+def test_animator_random_access_matches_the_stream(rhubarb_bank):
+    bank = Bank.load(rhubarb_bank)
+    tl = Timeline((Segment(0.0, 0.25, "M"), Segment(0.25, 0.6, "AA"), Segment(0.6, 0.9, "UW")), kind="phoneme")
+    anim = Animator(bank, tl, fps=FPS)
+    stream = list(anim.frames())
+    assert len(stream) == len(anim) == int(np.ceil(0.9 * FPS))
+    for i in (0, 5, 9, 13, len(anim) - 1):
+        np.testing.assert_array_equal(anim.frame_at(i / FPS + 0.001), stream[i])
+    # the AA segment is long: its midpoint shows D (AA -> D in the default map) exactly
+    np.testing.assert_array_equal(anim.frame_at(0.425), bank.images["D"])
