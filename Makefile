@@ -4,7 +4,7 @@ VENV    := .venv
 BIN     := $(VENV)/bin
 STAMP   := $(VENV)/.installed
 
-.PHONY: test demo bench fuzz preview clean install
+.PHONY: test demo bench fuzz docs-images clean install
 
 $(STAMP): pyproject.toml
 	$(PY) -m venv $(VENV)
@@ -29,3 +29,8 @@ fuzz: $(STAMP)
 
 clean:
 	rm -rf $(VENV) build *.egg-info .pytest_cache demo.mp4
+
+# The README's pictures, from the default subject.
+docs-images: $(STAMP)
+	$(BIN)/lipsync morph visemes/toon X D --frames 5 -o docs/strip.png
+	$(BIN)/lipsync preview visemes/toon -o docs/preview.png
