@@ -199,7 +199,11 @@ def _read_yaml(yaml_path: Path):
         # One parse: compose the node tree (it keeps line numbers for error messages), then
         # build plain data from it. SafeLoader refuses custom tags; libyaml's C loader is
         # ~10x faster when PyYAML was built with it.
-        loader = getattr(yaml, "CSafeLoader", yaml.SafeLoader)(text)
+        # Found by fuzzing: libyaml's composer recurses on the C stack and segfaults on ~50,000
+        # nested "[" or "- " (100 kB); such text goes to the Python loader, whose RecursionError
+        # is caught below.
+        fast = getattr(yaml, "CSafeLoader", None)
+        loader = (fast if fast is not None and _yaml_depth(text) <= _C_LOADER_MAX_DEPTH else yaml.SafeLoader)(text)
         try:
             root = loader.get_single_node()
             data = loader.construct_document(root) if root is not None else None
@@ -213,6 +217,20 @@ def _read_yaml(yaml_path: Path):
     except RecursionError:
         raise BankError("invalid YAML: nested too deeply", path=yaml_path) from None
     return root, data
+
+
+#: Deepest nesting handed to libyaml: far beyond any bank (which nests 5 levels), far below
+#: the ~10,000s of levels at which its recursion overflows the C stack.
+_C_LOADER_MAX_DEPTH = 200
+
+
+def _yaml_depth(text: str) -> int:
+    """Upper bound on the flow nesting plus the longest "- - -" run on one line."""
+    codes = np.frombuffer(text.encode("utf-8", "surrogatepass"), dtype=np.uint8)
+    step = np.isin(codes, (ord("["), ord("{"))).astype(np.int64) - np.isin(codes, (ord("]"), ord("}")))
+    flow = int(np.cumsum(step).max()) if codes.size else 0
+    dashes = max((len(m.group()) // 2 for m in re.finditer(r"(?:-[ \t]+)+", text)), default=0)
+    return flow + dashes
 
 
 def _read_image(path: Path, where: str, yaml_path: Path, line: Optional[int]) -> np.ndarray:

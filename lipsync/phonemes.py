@@ -261,6 +261,8 @@ def _load_yaml_model(model, path: Path, error):
         raise error(f"not valid YAML ({exc.problem})", path=path, line=line) from None
     except yaml.YAMLError as exc:
         raise error(f"not valid YAML ({exc})", path=path) from None
+    except RecursionError:  # found by fuzzing: thousands of nested [ or { overflow PyYAML's recursion
+        raise error("not valid YAML (nested too deeply)", path=path) from None
     if not isinstance(data, dict):
         raise error("expected a YAML mapping (name:, silence:, map:, ...)", path=path, line=1)
     try:

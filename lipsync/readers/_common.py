@@ -158,6 +158,10 @@ def load_json(path: str, text: str):
         return json.loads(text)
     except json.JSONDecodeError as exc:
         raise TimelineError(f"not valid JSON ({exc.msg})", path=path, line=exc.lineno) from None
+    except ValueError as exc:
+        # Found by fuzzing: an integer of more than 4300 digits hits Python's int-from-text
+        # limit, a plain ValueError (not a JSONDecodeError) that named no file.
+        raise TimelineError(f"not usable JSON ({str(exc)[:80]})", path=path, line=1) from None
     except RecursionError:
         raise TimelineError("JSON nested too deeply", path=path, line=1) from None
 
@@ -197,7 +201,10 @@ def json_time(value, path: str, line: Optional[int], what: str) -> float:
     if isinstance(value, bool) or value is None:
         raise TimelineError(f"{what} {value!r} is not a number", path=path, line=line)
     if isinstance(value, (int, float)):
-        v = float(value)
+        try:
+            v = float(value)
+        except OverflowError:  # found by fuzzing: a JSON integer beyond float range (10**400)
+            raise TimelineError(f"{what} {str(value)[:20]}... is too large", path=path, line=line) from None
         if not math.isfinite(v):
             raise TimelineError(f"{what} {value!r} is not a finite number", path=path, line=line)
         return v

@@ -138,7 +138,8 @@ def _scan(path: str, text: str) -> Tuple[float, float, List[_Tier]]:
     if not s.flag():
         return xmin, xmax, tiers
     size, line = s.num("number of tiers")
-    if size != int(size) or not 0 <= size <= _MAX_COUNT:
+    # Range first (found by fuzzing): int() of an infinite size ("1e999") raised OverflowError.
+    if not 0 <= size <= _MAX_COUNT or size != int(size):
         raise TimelineError(f"bad number of tiers {size:g}", path=path, line=line)
     for _ in range(int(size)):
         tcls, tline = s.str("tier class")
@@ -146,7 +147,7 @@ def _scan(path: str, text: str) -> Tuple[float, float, List[_Tier]]:
         txmin, _ = s.num("tier xmin")
         txmax, _ = s.num("tier xmax")
         count, cline = s.num("number of intervals")
-        if count != int(count) or not 0 <= count <= _MAX_COUNT:
+        if not 0 <= count <= _MAX_COUNT or count != int(count):  # range first, as above
             raise TimelineError(f"bad interval count {count:g}", path=path, line=cline)
         entries = []
         for _ in range(int(count)):
