@@ -150,6 +150,9 @@ def _scaled_bank(src_dir: Path, out_dir: Path, size) -> Path:
         # pixel centres: x' = (x + 0.5) * s - 0.5 + pad keeps the mirror axis on the centre
         v["lines"] = {n: [[(x + 0.5) * s - 0.5 + pad, (y + 0.5) * s - 0.5] for x, y in line]
                       for n, line in v["lines"].items()}
+        # the wider canvas needs its own frame anchors, as the subject has at its edges
+        v["lines"]["canvas_side_l"] = [[4.0, 0.05 * H], [4.0, 0.95 * H]]
+        v["lines"]["canvas_side_r"] = [[W - 5.0, 0.05 * H], [W - 5.0, 0.95 * H]]
     (out_dir / "bank.yaml").write_text(yaml.safe_dump(spec, sort_keys=False))
     return out_dir
 
