@@ -1,0 +1,371 @@
+"""Clean failures of ``lipsync render``, each through the command line.
+
+Environment failures -- ffmpeg dying mid-stream or at the end, an output folder that cannot
+take the file, a full disk, Ctrl-C -- end with exit 1 (130 for Ctrl-C), a message on
+stderr saying what happened, nothing at OUT and no temporary file beside it. Bad input is
+refused with exit 2 and a message naming the file: bank image paths that leave the bank
+folder (``../``, absolute, a symlink out), YAML custom tags, images above the pixel limit
+(by PNG and by JPEG header), more control lines or visemes than allowed, a timeline naming
+a viseme the bank lacks, an unknown ``--method`` or ``--format``.
+
+Failures that need a real process (ffmpeg, signals) run ``python -m lipsync`` as a
+subprocess; the rest call :func:`lipsync.cli.main` in-process, which is much faster.
+"""
+
+from __future__ import annotations
+
+import errno
+import os
+import shutil
+import signal
+import stat
+import struct
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import List
+
+import cv2
+import numpy as np
+import pytest
+import yaml
+
+import synthetic
+from lipsync import cli, encode
+from lipsync.bank import MAX_IMAGE_PIXELS, MAX_LINES, MAX_VISEMES
+
+ROOT = Path(__file__).resolve().parent.parent
+HELLO = ROOT / "samples" / "hello.phn"
+#: Upper bound on any one command here; only a hang reaches it.
+CMD_TIMEOUT_S = 300
+
+
+# --------------------------------------------------------------------------- helpers
+
+@pytest.fixture(scope="module")
+def bank(tmp_path_factory) -> Path:
+    """A small bank the default (Rhubarb-shape) map renders, with its flows precomputed."""
+    folder = synthetic.write_bank(tmp_path_factory.mktemp("clibank") / "bank", synthetic.RHUBARB_SHAPES)
+    result = run_cli("preprocess", str(folder), "--jobs", "2", "--quiet")
+    assert result.returncode == 0, result.stderr
+    return folder
+
+
+def run_cli(*args: str, env_extra=None, **kwargs) -> subprocess.CompletedProcess:
+    env = dict(os.environ, **(env_extra or {}))
+    return subprocess.run([sys.executable, "-m", "lipsync", *args], capture_output=True, text=True,
+                          timeout=CMD_TIMEOUT_S, env=env, **kwargs)
+
+
+def render_args(bank: Path, out: Path, timeline: Path = HELLO, *extra: str) -> List[str]:
+    return ["render", str(timeline), "-o", str(out), "--bank", str(bank), "--quiet", *extra]
+
+
+def assert_nothing_left(folder: Path, before=()) -> None:
+    """No output and no temporary file (hidden or not) in the output folder."""
+    left = sorted(set(os.listdir(folder)) - set(before))
+    assert left == [], f"left behind in {folder}: {left}"
+
+
+def fake_ffmpeg(tmp_path: Path, body: str) -> Path:
+    """A shell script standing in for ffmpeg (lipsync finds ffmpeg through imageio-ffmpeg,
+    which honours IMAGEIO_FFMPEG_EXE)."""
+    script = tmp_path / "fake-ffmpeg"
+    script.write_text("#!/bin/sh\n" + body)
+    script.chmod(script.stat().st_mode | stat.S_IXUSR | stat.S_IXGRP | stat.S_IXOTH)
+    return script
+
+
+def main_in_process(argv: List[str], capsys):
+    code = cli.main(argv)
+    captured = capsys.readouterr()
+    return code, captured.err
+
+
+# --------------------------------------------------------------------------- ffmpeg failing
+
+#: One 192x160 RGB frame is 92,160 bytes: the fake reads ~3 frames, then fails.
+FRAME_BYTES_READ = 300_000
+
+
+@pytest.mark.parametrize("when", ["mid-stream", "at-the-end"])
+def test_ffmpeg_failing(bank, tmp_path, when):
+    body = {"mid-stream": f"head -c {FRAME_BYTES_READ} > /dev/null\n",
+            "at-the-end": "cat > /dev/null\n"}[when]
+    script = fake_ffmpeg(tmp_path, body + 'echo "fake-ffmpeg: encoder exploded" >&2\nexit 1\n')
+    out_dir = tmp_path / "out"
+    out_dir.mkdir()
+    result = run_cli(*render_args(bank, out_dir / "talk.mp4"), env_extra={"IMAGEIO_FFMPEG_EXE": str(script)})
+    assert result.returncode == 1, result.stderr
+    assert "lipsync: error:" in result.stderr and "ffmpeg" in result.stderr
+    assert "encoder exploded" in result.stderr  # ffmpeg's own words are quoted
+    assert str(out_dir / "talk.mp4") in result.stderr
+    assert_nothing_left(out_dir)
+
+
+# --------------------------------------------------------------------------- output path
+
+def test_output_folder_missing(bank, tmp_path):
+    out = tmp_path / "no" / "such" / "folder" / "talk.mp4"
+    result = run_cli(*render_args(bank, out))
+    assert result.returncode == 1
+    assert "output folder does not exist" in result.stderr and str(out) in result.stderr
+    assert not (tmp_path / "no").exists()
+
+
+def test_output_folder_is_a_file(bank, tmp_path):
+    blocker = tmp_path / "file"
+    blocker.write_text("not a folder")
+    result = run_cli(*render_args(bank, blocker / "talk.mp4"))
+    assert result.returncode == 1
+    assert "not a folder" in result.stderr
+    assert sorted(os.listdir(tmp_path)) == ["file"] and blocker.read_text() == "not a folder"
+
+
+def test_output_folder_not_writable(bank, tmp_path, monkeypatch, capsys):
+    # In-process so that it also holds when the tests run as root (who may write anywhere):
+    # the writer's first write into the folder fails as a read-only folder would make it.
+    out_dir = tmp_path / "ro"
+    out_dir.mkdir()
+    real_open = os.open
+
+    def refusing_open(path, flags, *args, **kwargs):
+        if os.path.dirname(os.fspath(path)) == str(out_dir) and flags & os.O_CREAT:
+            raise PermissionError(errno.EACCES, "Permission denied", os.fspath(path))
+        return real_open(path, flags, *args, **kwargs)
+
+    monkeypatch.setattr(encode.os, "open", refusing_open)
+    code, err = main_in_process(render_args(bank, out_dir / "talk.mp4", HELLO, "--store", str(bank / ".lipsync")),
+                                capsys)
+    assert code == 1
+    assert "not writable" in err and str(out_dir / "talk.mp4") in err
+    assert_nothing_left(out_dir)
+
+
+def test_output_is_an_existing_folder(bank, tmp_path):
+    out = tmp_path / "talk.mp4"
+    out.mkdir()
+    result = run_cli(*render_args(bank, out, HELLO, "--format", "mp4"))
+    assert result.returncode == 1
+    assert "folder of that name exists" in result.stderr
+    assert os.listdir(out) == [] and sorted(os.listdir(tmp_path)) == ["talk.mp4"]
+
+
+# --------------------------------------------------------------------------- full disk
+
+@pytest.mark.parametrize("fmt", ["mp4", "png"])
+def test_disk_full_mid_render(bank, tmp_path, monkeypatch, capsys, fmt):
+    calls = {"n": 0}
+    real_write_all = encode._write_all
+
+    def filling_disk(stream, data):
+        calls["n"] += 1
+        if calls["n"] > 5:  # a few frames fit, then the disk is full
+            raise OSError(errno.ENOSPC, "No space left on device")
+        real_write_all(stream, data)
+
+    monkeypatch.setattr(encode, "_write_all", filling_disk)
+    out_dir = tmp_path / "out"
+    out_dir.mkdir()
+    out = out_dir / ("talk.mp4" if fmt == "mp4" else "frames")
+    code, err = main_in_process(render_args(bank, out, HELLO, "--format", fmt), capsys)
+    assert code == 1
+    assert calls["n"] == 6  # it failed at the write that hit the full disk, and stopped
+    assert "lipsync: error:" in err and ("disk full" in err or "No space left" in err)
+    assert_nothing_left(out_dir)
+
+
+# --------------------------------------------------------------------------- Ctrl-C
+
+def long_timeline(path: Path, seconds: float = 120.0) -> Path:
+    """A TIMIT-style phone file alternating open and closed mouths for ``seconds``."""
+    rate, phone = 16000, 0.12
+    rows = [f"{int(i * phone * rate)} {int((i + 1) * phone * rate)} {('aa', 'm', 'iy', 'uw')[i % 4]}"
+            for i in range(int(seconds / phone))]
+    path.write_text("\n".join(rows) + "\n")
+    return path
+
+
+def test_ctrl_c_during_render(bank, tmp_path):
+    timeline = long_timeline(tmp_path / "long.phn")
+    out_dir = tmp_path / "out"
+    out_dir.mkdir()
+    out = out_dir / "talk.mp4"
+    proc = subprocess.Popen([sys.executable, "-m", "lipsync", *render_args(bank, out, timeline, "--method",
+                                                                           "beier-neely")],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        # Wait until the encoder's temporary output exists and has received data: frames are
+        # flowing. beier-neely renders ~3000 frames here, far longer than this wait.
+        deadline = time.monotonic() + CMD_TIMEOUT_S
+        while proc.poll() is None and time.monotonic() < deadline:
+            partial = [p for p in out_dir.iterdir() if p.name.startswith(".talk.mp4.partial")]
+            if partial and partial[0].stat().st_size > 0:
+                break
+            time.sleep(0.02)
+        assert proc.poll() is None, "render ended before it could be interrupted"
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode == 130, err
+    assert "interrupted" in err and "no partial output" in err
+    assert "Traceback" not in err
+    assert_nothing_left(out_dir)
+
+
+# --------------------------------------------------------------------------- refusals (exit 2)
+
+@pytest.fixture()
+def bank_copy(bank, tmp_path) -> Path:
+    folder = tmp_path / "bank"
+    shutil.copytree(bank, folder, ignore=shutil.ignore_patterns(".lipsync"))
+    return folder
+
+
+def edit_bank(folder: Path, change) -> Path:
+    spec = yaml.safe_load((folder / "bank.yaml").read_text())
+    change(spec)
+    (folder / "bank.yaml").write_text(yaml.safe_dump(spec, sort_keys=False))
+    return folder / "bank.yaml"
+
+
+def refused(argv: List[str], capsys, *needles: str, out: Path = None) -> str:
+    code, err = main_in_process(argv, capsys)
+    assert code == 2, err
+    assert err.startswith("lipsync: error:")
+    for needle in needles:
+        assert needle in err, f"{needle!r} not in: {err}"
+    if out is not None:
+        assert not out.exists()
+    return err
+
+
+@pytest.mark.parametrize("how", ["dotdot", "absolute", "symlink-out", "symlinked-folder-out"])
+def test_image_paths_leaving_the_bank_are_refused(bank_copy, tmp_path, capsys, how):
+    outside = tmp_path / "outside"
+    outside.mkdir()
+    shutil.copy(bank_copy / "A.png", outside / "A.png")  # a perfectly good image, just elsewhere
+    if how == "dotdot":
+        rel = "../outside/A.png"
+    elif how == "absolute":
+        rel = str(outside / "A.png")
+    elif how == "symlink-out":
+        (bank_copy / "link.png").symlink_to(outside / "A.png")
+        rel = "link.png"
+    else:
+        (bank_copy / "sub").symlink_to(outside)
+        rel = "sub/A.png"
+    yaml_path = edit_bank(bank_copy, lambda s: s["visemes"]["A"].__setitem__("image", rel))
+    out = tmp_path / "talk.mp4"
+    refused(render_args(bank_copy, out), capsys, str(yaml_path), "'A'", out=out)
+    err = refused(["check", str(bank_copy)], capsys, str(yaml_path))
+    assert ("outside the bank folder" in err) or ("relative to the bank folder" in err)
+
+
+def test_image_path_inside_the_bank_through_a_subfolder_is_fine(bank_copy, capsys):
+    (bank_copy / "img").mkdir()
+    shutil.move(str(bank_copy / "A.png"), bank_copy / "img" / "A.png")
+    edit_bank(bank_copy, lambda s: s["visemes"]["A"].__setitem__("image", "img/../img/A.png"))
+    code, err = main_in_process(["check", str(bank_copy)], capsys)
+    assert code == 0, err
+
+
+@pytest.mark.parametrize("tag", ["!!python/object/apply:os.system ['touch PWNED']", "!custom toon",
+                                 "!!python/name:os.system"])
+def test_yaml_custom_tags_are_refused(bank_copy, tmp_path, capsys, tag, monkeypatch):
+    yaml_path = bank_copy / "bank.yaml"
+    text = yaml_path.read_text().replace("name: synthetic", f"name: {tag}", 1)
+    assert text != yaml_path.read_text()
+    yaml_path.write_text(text)
+    monkeypatch.chdir(tmp_path)
+    out = tmp_path / "talk.mp4"
+    refused(render_args(bank_copy, out), capsys, str(yaml_path), "invalid YAML", out=out)
+    assert not (tmp_path / "PWNED").exists()
+
+
+def _png_claiming(width: int, height: int) -> bytes:
+    ok, buf = cv2.imencode(".png", np.zeros((2, 2, 3), np.uint8))
+    data = bytearray(buf.tobytes())
+    data[16:24] = struct.pack(">II", width, height)  # IHDR width and height
+    return bytes(data)
+
+
+def _jpeg_claiming(width: int, height: int) -> bytes:
+    ok, buf = cv2.imencode(".jpg", np.full((16, 16, 3), 128, np.uint8))
+    data = bytearray(buf.tobytes())
+    i = data.find(b"\xff\xc0")  # baseline frame header: length, precision, height, width
+    data[i + 5:i + 9] = struct.pack(">HH", height, width)
+    return bytes(data)
+
+
+@pytest.mark.parametrize("kind", ["png", "jpeg"])
+def test_images_above_the_pixel_limit_are_refused(bank_copy, tmp_path, capsys, kind):
+    # 8000 x 4400 is just over 7680 x 4320; the files are a few hundred bytes, so only the
+    # header says how big they are (a decompression bomb).
+    width, height = 8000, 4400
+    assert width * height > MAX_IMAGE_PIXELS
+    name = "big.png" if kind == "png" else "big.jpg"
+    (bank_copy / name).write_bytes(_png_claiming(width, height) if kind == "png" else _jpeg_claiming(width, height))
+    yaml_path = edit_bank(bank_copy, lambda s: s["visemes"]["B"].__setitem__("image", name))
+    out = tmp_path / "talk.mp4"
+    refused(render_args(bank_copy, out), capsys, str(yaml_path), "'B'", "8000x4400", "above the limit", out=out)
+
+
+def test_a_real_jpeg_bank_still_loads(bank_copy, capsys):
+    # The JPEG header check must read true sizes: a bank of JPEG images renders as before.
+    def to_jpeg(spec):
+        for v, entry in spec["visemes"].items():
+            img = cv2.imread(str(bank_copy / entry["image"]))
+            cv2.imwrite(str(bank_copy / f"{v}.jpg"), img)
+            entry["image"] = f"{v}.jpg"
+
+    edit_bank(bank_copy, to_jpeg)
+    code, err = main_in_process(["check", str(bank_copy)], capsys)
+    assert code == 0, err
+
+
+def test_more_lines_than_allowed_are_refused(bank_copy, tmp_path, capsys):
+    def add_lines(spec):
+        for entry in spec["visemes"].values():
+            for i in range(MAX_LINES + 1 - len(entry["lines"])):
+                entry["lines"][f"extra{i}"] = [[10.0 + i % 50, 10.0], [10.0 + i % 50, 20.0]]
+
+    yaml_path = edit_bank(bank_copy, add_lines)
+    out = tmp_path / "talk.mp4"
+    refused(render_args(bank_copy, out), capsys, str(yaml_path), f"{MAX_LINES + 1} lines", f"at most {MAX_LINES}",
+            out=out)
+
+
+def test_more_visemes_than_allowed_are_refused(bank_copy, tmp_path, capsys):
+    def add_visemes(spec):
+        first = next(iter(spec["visemes"].values()))
+        for i in range(MAX_VISEMES + 1 - len(spec["visemes"])):
+            spec["visemes"][f"V{i}"] = dict(first)
+
+    yaml_path = edit_bank(bank_copy, add_visemes)
+    out = tmp_path / "talk.mp4"
+    refused(render_args(bank_copy, out), capsys, str(yaml_path), f"{MAX_VISEMES + 1} visemes",
+            f"at most {MAX_VISEMES}", out=out)
+
+
+def test_timeline_naming_a_viseme_the_bank_lacks(bank, tmp_path, capsys):
+    cues = tmp_path / "cues.tsv"
+    cues.write_text("0.00\tX\n0.20\tB\n0.45\tZ\n0.70\tX\n")  # Rhubarb TSV; the bank has no Z
+    out = tmp_path / "talk.mp4"
+    refused(render_args(bank, out, cues), capsys, str(cues), "Z", out=out)
+
+
+@pytest.mark.parametrize("option, value", [("--method", "morph-o-matic"), ("--format", "gif")])
+def test_unknown_method_or_format(bank, tmp_path, capsys, option, value):
+    out = tmp_path / "talk.mp4"
+    with pytest.raises(SystemExit) as exc:
+        cli.main(render_args(bank, out, HELLO, option, value))
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert option in err and "invalid choice" in err and repr(value) in err
+    assert "flow" in err if option == "--method" else "mp4" in err  # the valid choices are listed
+    assert not out.exists()
