@@ -212,10 +212,14 @@ def _read_yaml(yaml_path: Path):
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         problem = getattr(exc, "problem", None) or str(exc).splitlines()[0]
+        # min(): PyYAML marks an error at the end of a file without a final newline one line
+        # past the last (found by fuzzing).
         raise BankError(f"invalid YAML: {problem}", path=yaml_path,
-                        line=mark.line + 1 if mark is not None else None) from None
+                        line=min(mark.line + 1, text.count("\n") + 1) if mark is not None else None) from None
     except RecursionError:
         raise BankError("invalid YAML: nested too deeply", path=yaml_path) from None
+    except ValueError as exc:  # found by fuzzing: an integer of > 4300 digits (Python's int-from-text limit)
+        raise BankError(f"invalid YAML: {str(exc)[:60]}", path=yaml_path) from None
     return root, data
 
 

@@ -257,12 +257,15 @@ def _load_yaml_model(model, path: Path, error):
     try:
         data = yaml.safe_load(text)
     except yaml.MarkedYAMLError as exc:
-        line = exc.problem_mark.line + 1 if exc.problem_mark else None
+        # min(): the end-of-file mark can lie one line past the last (found by fuzzing).
+        line = min(exc.problem_mark.line + 1, text.count("\n") + 1) if exc.problem_mark else None
         raise error(f"not valid YAML ({exc.problem})", path=path, line=line) from None
     except yaml.YAMLError as exc:
         raise error(f"not valid YAML ({exc})", path=path) from None
     except RecursionError:  # found by fuzzing: thousands of nested [ or { overflow PyYAML's recursion
         raise error("not valid YAML (nested too deeply)", path=path) from None
+    except ValueError as exc:  # found by fuzzing: an integer of > 4300 digits (Python's int-from-text limit)
+        raise error(f"not valid YAML ({str(exc)[:60]})", path=path) from None
     if not isinstance(data, dict):
         raise error("expected a YAML mapping (name:, silence:, map:, ...)", path=path, line=1)
     try:

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import os
 
-from hypothesis import HealthCheck, settings
+from hypothesis import HealthCheck, Phase, settings
 
 #: Cases per fuzz test in the quick profile: enough to pass every case kind (generated,
 #: mutated real file, random bytes) several times for each reader while keeping the whole
@@ -30,13 +30,19 @@ QUICK_EXAMPLES = 120
 #: per loader; each reader and each loader has its own test.
 FUZZ_EXAMPLES = 10_000
 
+#: No "explain" phase: it re-runs a failing case under line tracing, 10-100x slower, which
+#: trips the fuzz tests' hang watchdog and reports a Hang instead of the real failure.
+_PHASES = [Phase.explicit, Phase.reuse, Phase.generate, Phase.target, Phase.shrink]
+
 _SUPPRESSED = [HealthCheck.too_slow, HealthCheck.data_too_large, HealthCheck.filter_too_much,
                HealthCheck.large_base_example]
 
 settings.register_profile("quick", max_examples=QUICK_EXAMPLES, deadline=None, derandomize=True,
-                          database=None, suppress_health_check=_SUPPRESSED, print_blob=True)
+                          database=None, suppress_health_check=_SUPPRESSED, print_blob=True,
+                          phases=_PHASES)
 settings.register_profile("fuzz", max_examples=FUZZ_EXAMPLES, deadline=None, derandomize=False,
-                          database=None, suppress_health_check=_SUPPRESSED, print_blob=True)
+                          database=None, suppress_health_check=_SUPPRESSED, print_blob=True,
+                          phases=_PHASES)
 
 #: The profile in force for this run.
 PROFILE = "fuzz" if os.environ.get("HYPOTHESIS_PROFILE", "").strip().lower() == "fuzz" else "quick"

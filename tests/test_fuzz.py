@@ -521,6 +521,28 @@ HUGE_CASES = {
 }
 
 
+#: Inputs the fuzzing found to escape as other exceptions, kept as fixed regression cases.
+FOUND_BY_FUZZING = [
+    ("gentle", '{"words": [{"case": "success", "start": 1' + "0" * 5000 + ', "phones": []}]}'),  # int limit
+    ("gentle", '{"words": [{"case": "success", "start": 1' + "0" * 400 + ', "phones": []}]}'),  # OverflowError
+    ("rhubarb-json", '{"mouthCues": [], "metadata": {"duration": 1' + "0" * 400 + '}}'),
+    ("textgrid", 'File type = "ooTextFile"\nObject class = "TextGrid"\nxmin = 0\nxmax = 1\n'
+                 'tiers? <exists>\nsize = 1e999\n'),
+    ("textgrid", 'File type = "ooTextFile short"\n"TextGrid"\n0\n1\n<exists>\n1\n"IntervalTier"\n'
+                 '"phones"\n0\n1\n-1e999\n'),
+]
+
+
+@pytest.mark.parametrize("case", range(len(FOUND_BY_FUZZING)))
+def test_fuzz_findings_are_timeline_errors(case, fuzz_dir):
+    fmt, text = FOUND_BY_FUZZING[case]
+    path = fuzz_dir / f"found-{case}{EXTENSIONS[fmt][0]}"
+    path.write_text(text)
+    for how in (fmt, None):
+        result = expect_clean(lambda: read_timeline(path, how), path, text.encode(), TimelineError)
+        assert isinstance(result, TimelineError)
+
+
 @pytest.mark.parametrize("fmt", sorted(HUGE_CASES))
 @pytest.mark.parametrize("k", [6, 12, 18, 300, 400])
 def test_huge_numbers_allocate_nothing_per_frame(fmt, k, fuzz_dir):
@@ -574,6 +596,10 @@ YAML_ATTACKS = [
     # Wrong types at the top.
     "- name\n- rest\n", "just text\n", "42\n", "", "\t\tname: t\n", "name: t\nname: u\n",
     "name: t\nrest: X\nvisemes: [X, A]\n", "name: t\nrest: X\nvisemes: X\n",
+    # Found by fuzzing: an integer beyond Python's 4300-digit int-from-text limit; an error
+    # at the end of a file without a final newline (PyYAML marks the line after the last).
+    "name: " + "9" * 5000 + "\nrest: X\nvisemes: {}\n",
+    "name: synthetic\nrest: X\nvisemes:\n  X:\n    image: X.png\n    l",
 ]
 
 
@@ -735,6 +761,15 @@ def test_bank_loader_fuzz(bank_seeds, data):
             assert folder.resolve() in real.parents
 
 
+@pytest.mark.parametrize("attack", range(len(YAML_ATTACKS)))
+def test_each_yaml_attack_on_the_bank_loader(bank_seeds, attack):
+    folder = bank_seeds[0][0]
+    content = YAML_ATTACKS[attack].encode()
+    (folder / "bank.yaml").write_bytes(content)
+    result = expect_clean(lambda: Bank.load(folder), folder / "bank.yaml", content, BankError)
+    assert isinstance(result, BankError)  # none of them is a valid bank
+
+
 # --------------------------------------------------------------------------- phoneme-map loader
 
 MAP_SEEDS = [p.read_text(encoding="utf-8") for p in sorted((data_dir("configs") / "maps").glob("*.yaml"))]
@@ -766,6 +801,15 @@ def map_case(draw):
     else:
         data = draw(st.binary(max_size=2000))
     return data, source
+
+
+@pytest.mark.parametrize("attack", range(len(MAP_ATTACKS)))
+def test_each_yaml_attack_on_the_map_loader(fuzz_dir, attack):
+    path = fuzz_dir / "attack-map.yaml"
+    content = MAP_ATTACKS[attack].encode()
+    path.write_bytes(content)
+    result = expect_clean(lambda: load_map(str(path)), path, content, MapError)
+    assert isinstance(result, MapError)
 
 
 @FUZZ
