@@ -68,6 +68,9 @@ MAX_HELD_PAUSE_S = 0.2
 # Non-closure segments shorter than this are dropped: lips cannot visibly reach a shape in
 # under 50 ms (about one frame at 24 fps), so showing it only adds a one-frame flicker.
 MIN_SEGMENT_S = 0.05
+#: Most frames one timeline may make: 11 hours at 25 fps, longer than any speech track, and
+#: bounded so that a wrong number in a file (frame 10^9) is an error, not gigabytes of frames.
+MAX_FRAMES = 1_000_000
 
 FPS_RANGE = (1.0, 120.0)
 
@@ -314,6 +317,10 @@ def sequence(visemes: Timeline, *, fps: float, rest: str, timing: Union[str, Cur
     closure_set = set(closures)
     total = visemes.duration if duration is None else float(duration)
     n_frames = frame_count(total, fps)
+    if n_frames > MAX_FRAMES:  # found with the fuzz tests' huge numbers: Moho frame 10**9 asked for 7.8 GB here
+        raise InputError(f"the timeline lasts {total:g} s: {n_frames} frames at {fps:g} fps, above the "
+                         f"limit of {MAX_FRAMES} (a time or frame number in the file is likely wrong)",
+                         path=visemes.path)
     if n_frames == 0:
         return []
     segs = plan_segments(visemes, rest=rest, closures=closure_set, max_held_pause=max_held_pause,

@@ -369,3 +369,30 @@ def test_unknown_method_or_format(bank, tmp_path, capsys, option, value):
     assert option in err and "invalid choice" in err and repr(value) in err
     assert "flow" in err if option == "--method" else "mp4" in err  # the valid choices are listed
     assert not out.exists()
+
+
+#: Address-space cap for the child in the test below: a regression (per-frame arrays for 10^9
+#: frames need ~8 GB) then fails fast with MemoryError instead of swamping the machine.
+CHILD_MEMORY_LIMIT = 3 << 30
+
+
+@pytest.mark.parametrize("name, text", [
+    ("huge.dat", "MohoSwitch1\n1 X\n1000000000 A\n"),                 # frame 10^9 at 24 fps
+    ("huge.phn", "0 1600 h#\n1600 100000000000000 aa\n"),              # 10^14 samples at 16 kHz
+    ("huge.tsv", "0.00\tX\n0.50\tB\n1e12\tX\n"),                       # a cue at 10^12 s
+])
+def test_absurdly_long_timelines_are_refused_without_allocating(bank, tmp_path, name, text):
+    import resource
+
+    timeline = tmp_path / name
+    timeline.write_text(text)
+    out = tmp_path / "talk.mp4"
+
+    def cap_memory():
+        resource.setrlimit(resource.RLIMIT_AS, (CHILD_MEMORY_LIMIT, CHILD_MEMORY_LIMIT))
+
+    result = subprocess.run([sys.executable, "-m", "lipsync", *render_args(bank, out, timeline)],
+                            capture_output=True, text=True, timeout=CMD_TIMEOUT_S, preexec_fn=cap_memory)
+    assert result.returncode == 2, result.stderr[-800:]
+    assert str(timeline) in result.stderr and "frames" in result.stderr and "limit" in result.stderr
+    assert sorted(os.listdir(tmp_path)) == [name]
