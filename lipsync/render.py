@@ -182,11 +182,9 @@ class Renderer:
     def __init__(self, bank, *, method: str = "flow", store: Optional[FlowStore] = None):
         METHODS.get(method)  # raises, listing the valid names, if unknown
         self.method = _canonical(method)
-        self.nb: NormalisedBank = bank if isinstance(bank, NormalisedBank) else None  # type: ignore
         self.bank: Bank = bank.bank if isinstance(bank, NormalisedBank) else bank
         self.store = store if store is not None else FlowStore.for_bank(self.bank)
-        if self.nb is None:
-            self.nb = normalise(self.bank, cache=self.store)
+        self.nb: NormalisedBank = bank if isinstance(bank, NormalisedBank) else normalise(self.bank, cache=self.store)
         h, w = self.nb.shape
         self.shape = (h, w)
         self._frame = np.empty((h, w, 3), np.uint8)
@@ -194,7 +192,6 @@ class Renderer:
         self._pairs: "OrderedDict[Tuple[str, str], _Pair]" = OrderedDict()
         self._full_a = np.empty((h, w, 3), np.uint8)
         self._full_b = np.empty((h, w, 3), np.uint8)
-        self._grid: Optional[np.ndarray] = None
 
     # ------------------------------------------------------------------ public
     def render(self, from_viseme: str, to_viseme: str, alpha: float, *, out: Optional[np.ndarray] = None
@@ -384,7 +381,7 @@ class Renderer:
         self._gather(p, p.img_a, p.fwd, p.jac_f, alpha, p.map_a, p.buf_a)
         self._gather(p, p.img_b, p.bwd, p.jac_b, 1.0 - alpha, p.map_b, p.buf_b)
 
-    def _splat_parts(self, p: _Pair, alpha: float) -> None:  # noqa: D401
+    def _splat_parts(self, p: _Pair, alpha: float) -> None:
         _splat(p.img_a, p.fwd, alpha, p.grid, p.buf_a)
         _splat(p.img_b, p.bwd, 1.0 - alpha, p.grid, p.buf_b)
 

@@ -26,11 +26,9 @@ and per loader.
 
 from __future__ import annotations
 
-import codecs
 import copy
 import json
 import math
-import os
 import re
 import resource
 import shutil
