@@ -487,7 +487,9 @@ def test_generators_also_make_files_the_readers_accept(fmt, fuzz_dir):
             return False
 
     text = find(generated(fmt), accepted,
-                settings=settings(max_examples=2000, database=None, deadline=None, derandomize=True,
+                # valid files are a minority of the near-valid ones (TextGrid's especially), and
+                # derandomized runs differ with what ran before: search widely
+                settings=settings(max_examples=10000, database=None, deadline=None, derandomize=True,
                                   phases=[Phase.generate]))
     path.write_text(text, encoding="utf-8")
     check_timeline(read_timeline(path, fmt), path)
