@@ -33,7 +33,7 @@ Methods (registry :data:`METHODS`):
 from __future__ import annotations
 
 from collections import OrderedDict
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Dict, Optional, Tuple
 
 import cv2
@@ -52,6 +52,13 @@ from .warp import beier_neely_map, identity_grid
 #: five-fold; more steps gain nothing, bilinear sampling of F limits it (measured in
 #: tests/test_render.py against 30 steps).
 FLOW_ITERATIONS = 3
+#: Anchors of the warm start: the inverse map is solved from scratch (FLOW_ITERATIONS steps)
+#: only at alpha = k / WARM_ANCHORS, once per pair and side; a frame at any other alpha
+#: starts from the nearest anchor's solution, at most 1/8 away, and needs WARM_ITERATIONS
+#: steps for the same accuracy. Anchors (not the previous frame) keep every frame a pure
+#: function of (pair, alpha), whatever order frames are asked for in.
+WARM_ANCHORS = 4
+WARM_ITERATIONS = 2
 #: Smallest Jacobian determinant a Newton step divides by. Where the warp folds over
 #: (det <= 0) there is no unique inverse; clamping keeps those rare pixels finite.
 MIN_DET = 0.05
@@ -100,6 +107,7 @@ class _Pair:
     work: "_NewtonBuffers"
     buf_a: np.ndarray
     buf_b: np.ndarray
+    anchors: Dict[Tuple[str, int], np.ndarray] = field(default_factory=dict)  # (side, k) -> coarse X
 
 
 @dataclass
@@ -329,8 +337,14 @@ class Renderer:
         """
         cv2.remap(flow, grid, None, cv2.INTER_LINEAR, dst=sampled, borderMode=cv2.BORDER_REPLICATE)
         cv2.addWeighted(sampled, -t, grid, 1.0, 0.0, dst=m)  # first-order guess Y - t F(Y)
+        Renderer._newton(flow, jac, t, grid, m, sampled, wk, FLOW_ITERATIONS)
+
+    @staticmethod
+    def _newton(flow: np.ndarray, jac: np.ndarray, t: float, grid: np.ndarray, m: np.ndarray,
+                sampled: np.ndarray, wk: _NewtonBuffers, iterations: int) -> None:
+        """Refine ``m`` toward ``X + t*flow(X) = grid`` by ``iterations`` Newton steps."""
         mx, my = m[..., 0], m[..., 1]
-        for _ in range(FLOW_ITERATIONS):
+        for _ in range(iterations):
             cv2.remap(flow, m, None, cv2.INTER_LINEAR, dst=sampled, borderMode=cv2.BORDER_REPLICATE)
             cv2.remap(jac, m, None, cv2.INTER_LINEAR, dst=wk.jac, borderMode=cv2.BORDER_REPLICATE)
             # residual r = X + t F(X) - Y
@@ -362,11 +376,26 @@ class Renderer:
             mx -= wk.t1
             my -= wk.a
 
-    def _gather(self, p: _Pair, image: np.ndarray, flow: np.ndarray, jac: np.ndarray, t: float,
+    def _solve_coarse(self, p: _Pair, side: str, flow: np.ndarray, jac: np.ndarray, t: float) -> None:
+        """Leave in ``p.work.m`` the coarse-grid X with ``X + t*flow(X) = Y`` (warm-started)."""
+        wk = p.work
+        k = int(round(t * WARM_ANCHORS))
+        if k == 0:  # near alpha 0 the first-order guess is as good as an anchor
+            self._invert(flow, jac, t, p.coarse, wk.m, wk.sampled, wk)
+            return
+        anchor = p.anchors.get((side, k))
+        if anchor is None:
+            self._invert(flow, jac, k / WARM_ANCHORS, p.coarse, wk.m, wk.sampled, wk)
+            anchor = p.anchors[(side, k)] = wk.m.copy()
+        np.copyto(wk.m, anchor)
+        if t != k / WARM_ANCHORS:
+            self._newton(flow, jac, t, p.coarse, wk.m, wk.sampled, wk, WARM_ITERATIONS)
+
+    def _gather(self, p: _Pair, side: str, image: np.ndarray, flow: np.ndarray, jac: np.ndarray, t: float,
                 m: np.ndarray, out: np.ndarray) -> None:
         """``out[Y] = image[X]`` with ``X + t*flow(X) = Y``, X solved on the coarse grid."""
         wk = p.work
-        self._invert(flow, jac, t, p.coarse, wk.m, wk.sampled, wk)
+        self._solve_coarse(p, side, flow, jac, t)
         # Upsample the displacement X - Y (not X itself): it vanishes at the ROI's edge, so
         # the edge clamping of cv2.resize costs nothing there.
         wk.m -= p.coarse
@@ -378,8 +407,8 @@ class Renderer:
         cv2.remap(image, m1, m2, cv2.INTER_LINEAR, dst=out, borderMode=cv2.BORDER_REPLICATE)
 
     def _flow_parts(self, p: _Pair, alpha: float) -> None:
-        self._gather(p, p.img_a, p.fwd, p.jac_f, alpha, p.map_a, p.buf_a)
-        self._gather(p, p.img_b, p.bwd, p.jac_b, 1.0 - alpha, p.map_b, p.buf_b)
+        self._gather(p, "a", p.img_a, p.fwd, p.jac_f, alpha, p.map_a, p.buf_a)
+        self._gather(p, "b", p.img_b, p.bwd, p.jac_b, 1.0 - alpha, p.map_b, p.buf_b)
 
     def _splat_parts(self, p: _Pair, alpha: float) -> None:
         _splat(p.img_a, p.fwd, alpha, p.grid, p.buf_a)

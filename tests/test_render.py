@@ -103,7 +103,7 @@ def test_coarse_solve_matches_the_full_resolution_solve(bank, monkeypatch):
     r = Renderer(bank)
     pair = r._pair("X", "O")
     full = _solve(pair, 0.6, render_mod.FLOW_ITERATIONS, monkeypatch)
-    r._gather(pair, pair.img_a, pair.fwd, pair.jac_f, 0.6, pair.map_a, pair.buf_a)
+    r._gather(pair, "a", pair.img_a, pair.fwd, pair.jac_f, 0.6, pair.map_a, pair.buf_a)
     err = np.abs(pair.map_a - full).max(axis=-1)
     assert err.mean() < 0.05 and np.percentile(err, 99) < 0.3
 
