@@ -192,6 +192,20 @@ def json_array_lines(text: str, key: str) -> List[int]:
         return []
 
 
+def json_list(path: str, data: bytes, key: str, tool: str):
+    """Decode a JSON document whose ``key`` holds a list: ``(doc, items, lines)``.
+
+    ``lines`` are the 1-based lines of the items (see :func:`json_array_lines`); a document
+    without such a list is a TimelineError saying it is not ``tool``'s output.
+    """
+    text = decode_text(path, data)
+    doc = load_json(path, text)
+    items = doc.get(key) if isinstance(doc, dict) else None
+    if not isinstance(items, list):
+        raise TimelineError(f'no "{key}" list: not {tool} output', path=path, line=1)
+    return doc, items, json_array_lines(text, key)
+
+
 def line_of(lines: List[int], index: int) -> Optional[int]:
     return lines[index] if 0 <= index < len(lines) else None
 

@@ -17,7 +17,7 @@ import re
 
 from ..errors import TimelineError
 from ..timeline import PHONEME, READERS, Reader, ReadOptions, Timeline
-from ._common import build, decode_text, json_array_lines, json_time, line_of, load_json, sniff_text
+from ._common import build, json_list, json_time, line_of, sniff_text
 
 _SUFFIX = re.compile(r"_[BIES]$")
 
@@ -35,12 +35,7 @@ def normalise_label(phone: str) -> str:
 
 def read(path: str, data: bytes, options: ReadOptions) -> Timeline:
     """Read a Gentle alignment (successfully aligned words only)."""
-    text = decode_text(path, data)
-    doc = load_json(path, text)
-    words = doc.get("words") if isinstance(doc, dict) else None
-    if not isinstance(words, list):
-        raise TimelineError('no "words" list: not Gentle JSON output', path=path, line=1)
-    lines = json_array_lines(text, "words")
+    _, words, lines = json_list(path, data, "words", "Gentle JSON")
     rows = []
     for i, word in enumerate(words):
         line = line_of(lines, i)

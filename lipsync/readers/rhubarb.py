@@ -13,8 +13,7 @@ from typing import Optional
 
 from ..errors import TimelineError
 from ..timeline import READERS, VISEME, Reader, ReadOptions, Timeline
-from ._common import (build, decode_text, first_nonblank, json_array_lines, json_time, line_of,
-                      load_json, parse_number, sniff_text)
+from ._common import (build, decode_text, first_nonblank, json_list, json_time, line_of, parse_number, sniff_text)
 
 _TSV_ROW = re.compile(r"\d+(\.\d+)?\t[A-Za-z]\w*")
 
@@ -39,12 +38,7 @@ def read_tsv(path: str, data: bytes, options: ReadOptions) -> Timeline:
 
 def read_json(path: str, data: bytes, options: ReadOptions) -> Timeline:
     """Read Rhubarb's JSON output."""
-    text = decode_text(path, data)
-    doc = load_json(path, text)
-    cues = doc.get("mouthCues") if isinstance(doc, dict) else None
-    if not isinstance(cues, list):
-        raise TimelineError('no "mouthCues" list: not Rhubarb JSON output', path=path, line=1)
-    lines = json_array_lines(text, "mouthCues")
+    doc, cues, lines = json_list(path, data, "mouthCues", "Rhubarb JSON")
     rows = []
     for i, cue in enumerate(cues):
         line = line_of(lines, i)
