@@ -15,6 +15,8 @@ def add_parser(sub) -> None:
     p.add_argument("bank", help="bank folder (with bank.yaml)")
     p.add_argument("--jobs", "-j", type=int, default=None, help="worker processes (default: all cores)")
     p.add_argument("--store", default=None, help="flow store folder (default: BANK/.lipsync)")
+    p.add_argument("--prune", action="store_true",
+                   help="remove store entries the bank no longer uses (a store of this bank only)")
     p.add_argument("--quiet", "-q", action="store_true", help="no progress bar")
     p.set_defaults(func=run_preprocess)
 
@@ -31,7 +33,8 @@ def run_preprocess(args: argparse.Namespace) -> int:
     if args.jobs is not None and args.jobs < 1:
         raise InputError(f"--jobs must be at least 1, got {args.jobs}")
     bank = Bank.load(args.bank)
-    report = preprocess(bank, store=FlowStore.for_bank(bank, args.store), jobs=args.jobs, quiet=args.quiet)
+    report = preprocess(bank, store=FlowStore.for_bank(bank, args.store), jobs=args.jobs, quiet=args.quiet,
+                        prune=args.prune)
     print(f"{bank.name}: {report.summary()}")
     return 0
 

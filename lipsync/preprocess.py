@@ -37,6 +37,11 @@ class PreprocessReport:
         Wall time.
     store_bytes : int
         Bytes on disk of the whole store afterwards.
+    stale : int
+        Entries in the store that this bank no longer uses (old images, lines or
+        parameters); removed when ``prune`` was asked for.
+    pruned : bool
+        Whether the stale entries were removed.
     """
 
     pairs: int
@@ -44,10 +49,16 @@ class PreprocessReport:
     reused: int
     seconds: float
     store_bytes: int
+    stale: int = 0
+    pruned: bool = False
 
     def summary(self) -> str:
-        return (f"{self.pairs} pairs: {self.computed} computed, {self.reused} reused in "
+        text = (f"{self.pairs} pairs: {self.computed} computed, {self.reused} reused in "
                 f"{self.seconds:.1f} s; store {self.store_bytes / 1e6:.1f} MB")
+        if self.stale:
+            text += (f"; {self.stale} stale entries removed" if self.pruned else
+                     f"; {self.stale} stale entries (--prune removes them)")
+        return text
 
 
 def all_pairs(names) -> List[Tuple[str, str]]:
@@ -66,7 +77,8 @@ def _compute_pair(root: str, key: str, shape: Tuple[int, int], lines_a: np.ndarr
 
 
 def preprocess(bank: Bank, *, store: Optional[FlowStore] = None, jobs: Optional[int] = None,
-               quiet: bool = False, normalised: Optional[NormalisedBank] = None) -> PreprocessReport:
+               quiet: bool = False, normalised: Optional[NormalisedBank] = None,
+               prune: bool = False) -> PreprocessReport:
     """Compute the flows of every pair of ``bank`` that its store lacks.
 
     Parameters
@@ -81,6 +93,9 @@ def preprocess(bank: Bank, *, store: Optional[FlowStore] = None, jobs: Optional[
         No progress bar.
     normalised : NormalisedBank, optional
         The bank already normalised (saves the work when the caller has it).
+    prune : bool
+        Remove store entries this bank no longer uses. Only for a store that holds one
+        bank (the default ``<bank>/.lipsync``): another bank's entries look stale too.
 
     Returns
     -------
@@ -131,6 +146,13 @@ def preprocess(bank: Bank, *, store: Optional[FlowStore] = None, jobs: Optional[
                     raise
     finally:
         bar.close()
+    keep = {store.pair_path(store.pair_key(bank, a, b, nb.axis)) for a, b in pairs}
+    keep |= {store.image_path(store.image_key(bank, v, nb.axis)) for v in bank.names}
+    stale = [p for p in store.entries() if p not in keep]
+    if prune:
+        for p in stale:
+            p.unlink(missing_ok=True)
     return PreprocessReport(pairs=len(pairs), computed=len(todo), reused=len(pairs) - len(todo),
-                            seconds=time.perf_counter() - t0, store_bytes=store.size_bytes())
+                            seconds=time.perf_counter() - t0, store_bytes=store.size_bytes(),
+                            stale=len(stale), pruned=prune)
 

@@ -38,6 +38,12 @@ def test_preprocess_twice_then_change_one_image(bank_dir):
     cv2.imwrite(str(bank_dir / "O.png"), img)
     third = run_cli("preprocess", str(bank_dir), "--quiet")
     assert "6 pairs: 3 computed, 3 reused" in third.stdout, third.stdout
+    # the old O's three pairs and its normalised-image entry (if any) are stale now
+    assert "3 stale entries (--prune removes them)" in third.stdout, third.stdout
+    fourth = run_cli("preprocess", str(bank_dir), "--quiet", "--prune")
+    assert "0 computed, 6 reused" in fourth.stdout and "3 stale entries removed" in fourth.stdout
+    assert len(list((bank_dir / ".lipsync" / "flows").glob("*.npz"))) == 6
+    assert "stale" not in run_cli("preprocess", str(bank_dir), "--quiet").stdout
 
 
 def test_truncated_entry_is_recomputed_with_a_warning(bank_dir):
