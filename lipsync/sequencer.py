@@ -45,7 +45,7 @@ from typing import Iterable, List, Optional, Sequence, Tuple, Union
 import numpy as np
 
 from .errors import InputError
-from .timeline import VISEME, Timeline
+from .timeline import VISEME, Segment, Timeline
 from .timing import DEFAULT_CURVE, Curve, get_curve
 
 # --- tuning constants (seconds) -------------------------------------------------------------
@@ -157,21 +157,6 @@ def check_fps(fps: float) -> float:
     return value
 
 
-@dataclass(frozen=True)
-class _Seg:
-    start: float
-    end: float
-    viseme: str
-
-    @property
-    def length(self) -> float:
-        return self.end - self.start
-
-    @property
-    def mid(self) -> float:
-        return 0.5 * (self.start + self.end)
-
-
 def plan_segments(visemes: Timeline, *, rest: str, closures: Iterable[str] = (),
                   max_held_pause: float = MAX_HELD_PAUSE_S, min_segment: float = MIN_SEGMENT_S,
                   duration: Optional[float] = None) -> List[Tuple[float, float, str]]:
@@ -187,25 +172,25 @@ def plan_segments(visemes: Timeline, *, rest: str, closures: Iterable[str] = (),
     closure_set = set(closures)
     total = visemes.duration if duration is None else float(duration)
     # Rule 1: gaps are rest.
-    segs: List[_Seg] = []
+    segs: List[Segment] = []
     t = 0.0
     for s in visemes:
         if s.start > total:
             break
         if s.start > t:
-            segs.append(_Seg(t, s.start, rest))
-        segs.append(_Seg(max(s.start, t), min(s.end, total), s.label))
+            segs.append(Segment(t, s.start, rest))
+        segs.append(Segment(max(s.start, t), min(s.end, total), s.label))
         t = min(s.end, total)
     if t < total:
-        segs.append(_Seg(t, total, rest))
-    segs = [s for s in segs if s.length > 0]
+        segs.append(Segment(t, total, rest))
+    segs = [s for s in segs if s.duration > 0]
     segs = _merge(segs)
     # Rule 3: short pauses between sounds hold the previous viseme.
-    held: List[_Seg] = []
+    held: List[Segment] = []
     for i, s in enumerate(segs):
         inner = 0 < i < len(segs) - 1
-        if s.viseme == rest and inner and s.length < max_held_pause:
-            held.append(_Seg(s.start, s.end, held[-1].viseme))
+        if s.label == rest and inner and s.duration < max_held_pause:
+            held.append(Segment(s.start, s.end, held[-1].label))
         else:
             held.append(s)
     segs = _merge(held)
@@ -215,29 +200,29 @@ def plan_segments(visemes: Timeline, *, rest: str, closures: Iterable[str] = (),
         # Rest is exempt: inner pauses that survive rule 3 are long, and leading or trailing
         # silence, however short, keeps the first and last frames at rest.
         candidates = [i for i, s in enumerate(segs)
-                      if s.length < min_segment and s.viseme not in closure_set and s.viseme != rest]
+                      if s.duration < min_segment and s.label not in closure_set and s.label != rest]
         if not candidates:
             break
-        i = min(candidates, key=lambda k: segs[k].length)
+        i = min(candidates, key=lambda k: segs[k].duration)
         s = segs[i]
         if i == 0:
-            segs[1] = _Seg(s.start, segs[1].end, segs[1].viseme)
+            segs[1] = Segment(s.start, segs[1].end, segs[1].label)
         elif i == len(segs) - 1:
-            segs[i - 1] = _Seg(segs[i - 1].start, s.end, segs[i - 1].viseme)
+            segs[i - 1] = Segment(segs[i - 1].start, s.end, segs[i - 1].label)
         else:
-            segs[i - 1] = _Seg(segs[i - 1].start, s.mid, segs[i - 1].viseme)
-            segs[i + 1] = _Seg(s.mid, segs[i + 1].end, segs[i + 1].viseme)
+            segs[i - 1] = Segment(segs[i - 1].start, s.mid, segs[i - 1].label)
+            segs[i + 1] = Segment(s.mid, segs[i + 1].end, segs[i + 1].label)
         del segs[i]
         segs = _merge(segs)
-    return [(s.start, s.end, s.viseme) for s in segs]
+    return [(s.start, s.end, s.label) for s in segs]
 
 
-def _merge(segs: List[_Seg]) -> List[_Seg]:
+def _merge(segs: List[Segment]) -> List[Segment]:
     # Rule 2: adjacent equal visemes merge.
-    out: List[_Seg] = []
+    out: List[Segment] = []
     for s in segs:
-        if out and out[-1].viseme == s.viseme:
-            out[-1] = _Seg(out[-1].start, s.end, s.viseme)
+        if out and out[-1].label == s.label:
+            out[-1] = Segment(out[-1].start, s.end, s.label)
         else:
             out.append(s)
     return out
