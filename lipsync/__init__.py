@@ -41,7 +41,7 @@ _EXPORTS = {
     "Animator": "animator",
 }
 _SUBMODULES = {"warp", "bank", "normalise", "flows", "store", "render", "timeline", "phonemes",
-               "sequencer", "timing", "encode", "animator", "registry", "errors", "cli", "preview"}
+               "sequencer", "timing", "encode", "animator", "registry", "errors", "cli", "preview", "clip"}
 
 
 def __getattr__(name: str) -> Any:

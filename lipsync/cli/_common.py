@@ -1,32 +1,56 @@
-"""``lipsync timeline FILE``: show the viseme track (and with --frames the frame schedule).
+"""Options and helpers that several commands share, so each is defined once.
 
-Output is tab-separated, for checking a timeline and for feeding other tools:
-
-* the viseme track: ``start  end  viseme`` per segment (seconds, 3 decimals);
-* with ``--frames``: ``frame  time  from  to  alpha`` per output frame.
-
-Options shared with ``lipsync render`` come from :func:`add_timeline_options`;
-:func:`load_viseme_timeline` does the reading, mapping and checking for both commands.
-``--format`` is left to ``render`` (its output format), so the input format option is
-``--timeline-format``. A Moho ``.dat`` file counts in frames of its own frame rate, given
-with ``--moho-fps`` (default 24), which is kept apart from ``--fps`` because the file's rate
-and the output rate are independent (a 24 fps Papagayo export rendered at 30 fps).
+* :func:`add_timeline_options`: how a timeline file is read and mapped (``render``,
+  ``timeline``, ``cues``, ...). ``--format`` is left to the commands (their output format),
+  so the input format option is ``--timeline-format``. A Moho ``.dat`` file counts in
+  frames of its own rate, given with ``--moho-fps`` (default 24), kept apart from ``--fps``
+  because the file's rate and the output rate are independent.
+* :func:`load_viseme_timeline`: reading, mapping and checking against a bank.
+* :func:`add_bank_option`, :func:`add_store_option`, :func:`add_jobs_option`,
+  :func:`add_quiet_option`: the subject, its flow store, worker processes, progress bars.
 """
 
 from __future__ import annotations
 
 import argparse
 import os
-import sys
 from typing import Iterable, Optional, Tuple
 
-from .phonemes import DEFAULT_MAP, MAPS, PhonemeMap, bank_viseme_timeline, load_map
-from .sequencer import FPS_RANGE, describe, plan_segments, sequence
-from .timeline import READERS, Timeline, read_timeline
-from .timing import CURVES, DEFAULT_CURVE
+from ..phonemes import DEFAULT_MAP, MAPS, PhonemeMap, bank_viseme_timeline, load_map
+from ..timeline import READERS, Timeline, read_timeline
+from ..timing import CURVES, DEFAULT_CURVE
 
-DEFAULT_FPS = 24.0
 DEFAULT_MOHO_FPS = 24.0
+
+
+def add_bank_option(parser: argparse.ArgumentParser) -> None:
+    """``--bank DIR``: the subject (default: the shipped toon)."""
+    parser.add_argument("--bank", default=None, metavar="DIR",
+                        help="viseme bank folder (default: the shipped toon)")
+
+
+def add_store_option(parser: argparse.ArgumentParser) -> None:
+    """``--store DIR``: where the bank's flows are cached."""
+    parser.add_argument("--store", default=None, metavar="DIR", help="flow store folder (default: BANK/.lipsync)")
+
+
+def add_jobs_option(parser: argparse.ArgumentParser, what: str = "preprocessing") -> None:
+    """``--jobs N``: worker processes."""
+    parser.add_argument("--jobs", "-j", type=int, default=None, metavar="N",
+                        help=f"processes for {what} (default: all cores)")
+
+
+def add_quiet_option(parser: argparse.ArgumentParser) -> None:
+    """``--quiet``: no progress bars or summary."""
+    parser.add_argument("--quiet", "-q", action="store_true", help="no progress bars or summary")
+
+
+def check_png(path: str) -> None:
+    """Refuse an output name that is not a .png (before any work is done)."""
+    from ..errors import InputError
+
+    if not path.lower().endswith(".png"):
+        raise InputError(f"output must be a .png file, got {path!r}")
 
 
 def add_timeline_options(parser: argparse.ArgumentParser) -> None:
@@ -90,40 +114,3 @@ def load_viseme_timeline(args: argparse.Namespace, *, rest: Optional[str] = None
     map_arg = str(getattr(args, "map", None) or "")
     return bank_viseme_timeline(timeline, pmap, viseme_names, rest=rest,
                                 map_path=map_arg if os.path.isfile(map_arg) else None)
-
-
-
-def add_parser(subparsers) -> argparse.ArgumentParser:
-    """Register ``lipsync timeline``."""
-    parser = subparsers.add_parser(
-        "timeline", help="print the viseme track of a timeline file (and the frame schedule)",
-        description="Print the viseme track of a timeline file and, with --frames, the frame "
-                    "schedule (tab-separated).")
-    parser.add_argument("timeline", metavar="FILE", help="phoneme or viseme timeline file")
-    add_timeline_options(parser)
-    parser.add_argument("--fps", type=float, default=DEFAULT_FPS, metavar="N",
-                        help=f"output frame rate for --frames, {FPS_RANGE[0]:g} to {FPS_RANGE[1]:g} (default: 24)")
-    parser.add_argument("--frames", action="store_true",
-                        help="also print the frame schedule: frame, time, from, to, alpha")
-    parser.set_defaults(func=run)
-    return parser
-
-
-def run(args: argparse.Namespace) -> int:
-    """Print the viseme track (and the frame schedule); returns the exit code."""
-    from .sequencer import check_fps
-
-    fps = check_fps(args.fps)
-    timeline, pmap = load_viseme_timeline(args)
-    rest = pmap.silence
-    out = sys.stdout
-    out.write(f"# {timeline.path}: {timeline.duration:.3f} s, map {pmap.name}; viseme track after the "
-              "sequencer's rules (gaps to rest, merges, short pauses held, flickers dropped)\n")
-    for start, end, viseme in plan_segments(timeline, rest=rest, closures=pmap.closures):
-        out.write(f"{start:.3f}\t{end:.3f}\t{viseme}\n")
-    if args.frames:
-        specs = sequence(timeline, fps=fps, rest=rest, timing=args.timing, closures=pmap.closures)
-        out.write(f"# {len(specs)} frames at {fps:g} fps, timing {args.timing}: frame, time, from, to, alpha\n")
-        if specs:
-            out.write(describe(specs, fps) + "\n")
-    return 0

@@ -1,6 +1,4 @@
-"""``make bench`` / ``python -m lipsync.bench``: every speed figure, measured side by side.
-
-Prints a table and writes ``bench/results.json``:
+"""Speed figures of the renderer (registered in :data:`lipsync.bench.FIGURES`):
 
 1. one Beier-Neely field (30 random lines) at 512x512 and 1280x720: ms and peak extra
    memory of :func:`lipsync.warp.beier_neely_map` against a naive full-broadcast numpy
@@ -12,53 +10,22 @@ Prints a table and writes ``bench/results.json``:
    as a multiple of real time, flows cached, at 512x512 and 1280x720;
 4. flow store bytes per field pixel.
 
-Timings are the median of repeated runs after a warm-up. Nothing here is asserted: the
-test suite checks correctness, this prints the numbers.
 """
 
 from __future__ import annotations
 
-import argparse
-import gc
-import json
-import os
 import shutil
-import statistics
 import subprocess
-import sys
 import tempfile
 import time
-import tracemalloc
+import sys
 from pathlib import Path
-from typing import Callable, Dict, List
+from typing import Dict, List
 
 import numpy as np
 
-from ._data import default_bank_dir
-
-
-def _median_ms(fn: Callable[[], object], repeat: int, warmup: int = 1) -> float:
-    for _ in range(warmup):
-        fn()
-    times = []
-    for _ in range(repeat):
-        t = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t)
-    return statistics.median(times) * 1e3
-
-
-def _peak_mb(fn: Callable[[], object]) -> float:
-    gc.collect()
-    tracemalloc.start()
-    try:
-        result = fn()
-        _, peak = tracemalloc.get_traced_memory()
-    finally:
-        tracemalloc.stop()
-    # the returned map itself (H x W x 2 float32) is output, not working memory
-    out = getattr(result, "nbytes", 0)
-    return max(0.0, (peak - out) / 1e6)
+from .._data import default_bank_dir
+from . import FIGURES, Context, median_ms, peak_mb
 
 
 def naive_beier_neely_map(shape, dst, src, a=1.0, b=2.0, p=0.5) -> np.ndarray:
@@ -102,9 +69,9 @@ def _random_symmetric_lines(shape, n, rng):
 
 
 def bench_field(rows: List[dict], quick: bool) -> None:
-    from .bank import WarpParams
-    from .flows import flow_field
-    from .warp import beier_neely_map
+    from ..bank import WarpParams
+    from ..flows import flow_field
+    from ..warp import beier_neely_map
 
     rng = np.random.default_rng(0)
     for shape in ((512, 512), (720, 1280)):
@@ -114,13 +81,13 @@ def bench_field(rows: List[dict], quick: bool) -> None:
         src_sym[: len(dst) // 2, :, 1] += 3.0  # symmetric motion: move each pair the same way
         src_sym[len(dst) // 2 : 2 * (len(dst) // 2), :, 1] += 3.0
         rep = 3 if quick else 7
-        ms = _median_ms(lambda: beier_neely_map(shape, dst_lines=dst, src_lines=src), rep)
-        mem = _peak_mb(lambda: beier_neely_map(shape, dst_lines=dst, src_lines=src))
-        naive_ms = _median_ms(lambda: naive_beier_neely_map(shape, dst, src), 1 if quick else 3, warmup=0)
-        naive_mem = _peak_mb(lambda: naive_beier_neely_map(shape, dst, src))
+        ms = median_ms(lambda: beier_neely_map(shape, dst_lines=dst, src_lines=src), rep)
+        mem = peak_mb(lambda: beier_neely_map(shape, dst_lines=dst, src_lines=src))
+        naive_ms = median_ms(lambda: naive_beier_neely_map(shape, dst, src), 1 if quick else 3, warmup=0)
+        naive_mem = peak_mb(lambda: naive_beier_neely_map(shape, dst, src))
         w = WarpParams()
-        full_ms = _median_ms(lambda: flow_field(shape, dst, src_sym, w), rep)
-        half_ms = _median_ms(lambda: flow_field(shape, dst, src_sym, w, axis=axis), rep)
+        full_ms = median_ms(lambda: flow_field(shape, dst, src_sym, w), rep)
+        half_ms = median_ms(lambda: flow_field(shape, dst, src_sym, w, axis=axis), rep)
         px = shape[0] * shape[1]
         rows.append({
             "figure": "beier_neely_field", "size": f"{shape[1]}x{shape[0]}", "lines": 30,
@@ -158,10 +125,10 @@ def _scaled_bank(src_dir: Path, out_dir: Path, size) -> Path:
 
 
 def bench_methods(rows: List[dict], banks: Dict[str, Path], quick: bool) -> None:
-    from .bank import Bank
-    from .preprocess import preprocess
-    from .render import METHODS, Renderer
-    from .store import FlowStore
+    from ..bank import Bank
+    from ..preprocess import preprocess
+    from ..render import METHODS, Renderer
+    from ..store import FlowStore
 
     pairs = [("X", "D"), ("A", "C"), ("B", "F"), ("E", "H")]
     for label, path in banks.items():
@@ -180,7 +147,7 @@ def bench_methods(rows: List[dict], banks: Dict[str, Path], quick: bool) -> None
 
             frames()  # warm-up: pair states and buffers
             n = len(pairs) * len(alphas)
-            row[f"{method}_ms"] = round(_median_ms(frames, 1 if method == "beier-neely" else 3, warmup=0) / n, 3)
+            row[f"{method}_ms"] = round(median_ms(frames, 1 if method == "beier-neely" else 3, warmup=0) / n, 3)
         # the bytes one flow frame reads and writes: two images and two flows in, one frame out
         img = bank.images[bank.names[0]]
         flows = store.get_pair(bank, "X", "D")
@@ -194,7 +161,7 @@ def bench_methods(rows: List[dict], banks: Dict[str, Path], quick: bool) -> None
                 np.copyto(d, s)
             np.copyto(out, img)
 
-        row["memcpy_ms"] = round(_median_ms(copy_bytes, 50), 3)
+        row["memcpy_ms"] = round(median_ms(copy_bytes, 50), 3)
         row["beier_neely_over_flow"] = round(row["beier-neely_ms"] / row["flow_ms"], 1)
         row["flow_over_memcpy"] = round(row["flow_ms"] / row["memcpy_ms"], 1)
         rows.append(row)
@@ -219,9 +186,9 @@ def bench_end_to_end(rows: List[dict], banks: Dict[str, Path], timeline: Path, a
 
 
 def bench_store(rows: List[dict], banks: Dict[str, Path]) -> None:
-    from .bank import Bank
-    from .preprocess import all_pairs
-    from .store import FlowStore
+    from ..bank import Bank
+    from ..preprocess import all_pairs
+    from ..store import FlowStore
 
     for label, path in banks.items():
         bank = Bank.load(path)
@@ -235,58 +202,32 @@ def bench_store(rows: List[dict], banks: Dict[str, Path]) -> None:
                      "float32_full_bytes_per_field_pixel": 8})
 
 
-def _table(rows: List[dict]) -> str:
-    lines = []
-    for fig in ("beier_neely_field", "frame", "end_to_end", "store"):
-        sel = [r for r in rows if r["figure"] == fig]
-        if not sel:
-            continue
-        keys = [k for k in sel[0] if k != "figure"]
-        widths = [max(len(k), *(len(str(r.get(k, ""))) for r in sel)) for k in keys]
-        lines.append(f"\n## {fig}")
-        lines.append("  ".join(k.ljust(w) for k, w in zip(keys, widths)))
-        for r in sel:
-            lines.append("  ".join(str(r.get(k, "")).ljust(w) for k, w in zip(keys, widths)))
-    return "\n".join(lines)
-
-
-def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m lipsync.bench", description=__doc__.splitlines()[0])
-    parser.add_argument("--quick", action="store_true", help="fewer repeats (a smoke run)")
-    parser.add_argument("--json", default="bench/results.json", help="where to write the results")
-    args = parser.parse_args(argv)
-    root = Path(__file__).resolve().parent.parent
-    conformance = root.parent / "shared" / "conformance" / "mfa"
-    if not conformance.is_dir():
-        conformance = root / "tests" / "data" / "conformance" / "mfa"
-    timeline, audio = conformance / "acoustic_corpus.TextGrid", conformance / "acoustic_corpus.wav"
-
-    rows: List[dict] = []
-    t0 = time.perf_counter()
-    with tempfile.TemporaryDirectory() as tmp:
-        banks = {"512x512": Path(tmp) / "toon512", "1280x720": Path(tmp) / "toon720"}
+def _toon_banks(ctx: Context) -> Dict[str, Path]:
+    """The default subject at 512x512 and scaled to 1280x720, made once per run."""
+    banks = {"512x512": ctx.tmp / "toon512", "1280x720": ctx.tmp / "toon720"}
+    if not banks["512x512"].exists():
         shutil.copytree(default_bank_dir(), banks["512x512"], ignore=shutil.ignore_patterns(".lipsync"))
         _scaled_bank(default_bank_dir(), banks["1280x720"], (1280, 720))
-        print("beier-neely field ...", file=sys.stderr)
-        bench_field(rows, args.quick)
-        print("frames per method ...", file=sys.stderr)
-        bench_methods(rows, banks, args.quick)
-        if audio.exists():
-            print("end to end ...", file=sys.stderr)
-            bench_end_to_end(rows, banks, timeline, audio)
-        bench_store(rows, banks)
-    meta = {"cpu_count": os.cpu_count(), "seconds": round(time.perf_counter() - t0, 1),
-            "python": sys.version.split()[0], "numpy": np.__version__}
-    print(_table(rows))
-    print(f"\n(total {meta['seconds']} s on {meta['cpu_count']} cores)")
-    out = Path(args.json)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp_out = out.with_suffix(".json.tmp")
-    tmp_out.write_text(json.dumps({"meta": meta, "results": rows}, indent=2) + "\n")
-    os.replace(tmp_out, out)
-    print(f"wrote {out}")
-    return 0
+    return banks
 
 
-if __name__ == "__main__":
-    sys.exit(main())
+@FIGURES.decorator("beier_neely_field")
+def _field(ctx: Context, rows: List[dict]) -> None:
+    bench_field(rows, ctx.quick)
+
+
+@FIGURES.decorator("frame")
+def _frame(ctx: Context, rows: List[dict]) -> None:
+    bench_methods(rows, _toon_banks(ctx), ctx.quick)
+
+
+@FIGURES.decorator("end_to_end")
+def _end_to_end(ctx: Context, rows: List[dict]) -> None:
+    audio = ctx.mfa / "acoustic_corpus.wav"
+    if audio.exists():
+        bench_end_to_end(rows, _toon_banks(ctx), ctx.mfa / "acoustic_corpus.TextGrid", audio)
+
+
+@FIGURES.decorator("store")
+def _store(ctx: Context, rows: List[dict]) -> None:
+    bench_store(rows, _toon_banks(ctx))

@@ -1,4 +1,4 @@
-"""Command-line interface: ``lipsync render|preprocess|check|morph|preview|timeline``.
+"""Command-line interface: one module per ``lipsync`` command, options they share in ``_common``.
 
 Exit codes (DESIGN.md): 0 success, 2 bad input (the message names the file and, where it
 applies, the line), 130 interrupted, 1 anything else.
@@ -10,17 +10,26 @@ import argparse
 import sys
 from typing import Callable, List, Optional
 
-from .errors import InputError
+from ..errors import InputError
 
 EXIT_OK, EXIT_FAILURE, EXIT_BAD_INPUT, EXIT_INTERRUPTED = 0, 1, 2, 130
 
-# Each subcommand module exposes ``add_parser(subparsers)`` that registers its parser with
-# ``set_defaults(func=run)``; ``run(args) -> int``. Listed here so --help shows them in order.
+# Each command module exposes ``add_parser(subparsers)`` that registers its parser with
+# ``set_defaults(func=run)``; ``run(args) -> int``. Listed here so --help shows them in the
+# order a user meets them: make video, inspect timing, prepare a subject, then services.
 _COMMAND_MODULES = [
-    "commands_render",
-    "commands_bank",
-    "commands_morph",
-    "timeline_cli",
+    "render",
+    "align",
+    "cues",
+    "timeline",
+    "init",
+    "check",
+    "preview",
+    "edit",
+    "preprocess",
+    "morph",
+    "serve",
+    "batch",
 ]
 
 
@@ -31,8 +40,8 @@ class _Parser(argparse.ArgumentParser):
 def build_parser() -> argparse.ArgumentParser:
     import importlib
 
-    parser = _Parser(prog="lipsync", description=__doc__.splitlines()[0])
-    from . import __version__
+    parser = _Parser(prog="lipsync", description="Speech to talking-head video by morphing between viseme images.")
+    from .. import __version__
 
     parser.add_argument("--version", action="version", version=f"lipsync {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
@@ -40,8 +49,8 @@ def build_parser() -> argparse.ArgumentParser:
     for name in _COMMAND_MODULES:
         try:
             module = importlib.import_module(f".{name}", __package__)
-        except ModuleNotFoundError as exc:  # a stage not built yet must not break the others
-            if exc.name and exc.name.endswith(name):
+        except ModuleNotFoundError as exc:  # a command not built yet must not break the others
+            if exc.name == f"{__package__}.{name}":
                 continue
             raise
         module.add_parser(sub)
@@ -57,7 +66,7 @@ def main(argv: Optional[List[str]] = None) -> int:
     """Entry point of the ``lipsync`` console script; returns the exit code."""
     import warnings
 
-    from .encode import EncodeError
+    from ..encode import EncodeError
 
     parser = build_parser()
     args = parser.parse_args(argv)

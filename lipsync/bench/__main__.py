@@ -1,0 +1,7 @@
+"""``python -m lipsync.bench``."""
+
+import sys
+
+from . import main
+
+sys.exit(main())

@@ -1,0 +1,39 @@
+"""``lipsync check BANK``: validate a bank and summarise it, computing nothing."""
+
+from __future__ import annotations
+
+import argparse
+
+from ..bank import Bank
+from ..store import FlowStore
+from ._common import add_store_option
+
+
+def add_parser(sub) -> None:
+    c = sub.add_parser("check", help="validate a bank and summarise it, computing nothing")
+    c.add_argument("bank", help="bank folder (with bank.yaml)")
+    add_store_option(c)
+    c.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from ..normalise import bank_axis, symmetric_lines
+    from ..preprocess import all_pairs
+
+    bank = Bank.load(args.bank)
+    h, w = bank.shape
+    print(f"{bank.yaml_path}: OK")
+    print(f"  name {bank.name!r}, {len(bank.names)} visemes ({', '.join(bank.names)}), rest {bank.rest!r}")
+    print(f"  images {w}x{h}, {len(bank.line_names)} control lines, warp a={bank.warp.a} b={bank.warp.b} "
+          f"p={bank.warp.p}")
+    if bank.symmetry:
+        axis = bank_axis(bank)
+        worst = max(float(abs(symmetric_lines(bank.lines[v], bank.line_names, axis) - bank.lines[v]).max())
+                    for v in bank.names)
+        print(f"  symmetry on: axis x = {axis}, lines move by at most {worst:.2f} px when normalised")
+    store = FlowStore.for_bank(bank, args.store)
+    pairs = all_pairs(bank.names)
+    axis = bank_axis(bank) if bank.symmetry else None
+    present = sum(store.pair_path(store.pair_key(bank, a, b, axis)).exists() for a, b in pairs)
+    print(f"  flow store {store.root}: {present} of {len(pairs)} pairs present")
+    return 0

@@ -1,0 +1,36 @@
+"""``lipsync preview BANK``: every viseme with its control lines and their names, on one sheet."""
+
+from __future__ import annotations
+
+import argparse
+
+from ._common import check_png
+
+#: Width of one tile of the sheet: large enough to read line names at 512x512.
+SHEET_TILE = 320
+
+
+def add_parser(sub) -> None:
+    p = sub.add_parser("preview", help="draw every viseme with its control lines (check line placement)")
+    p.add_argument("bank", help="bank folder")
+    p.add_argument("-o", "--output", required=True, metavar="SHEET.png")
+    p.add_argument("--normalised", action="store_true", help="show the images and lines after symmetric "
+                                                             "normalisation")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from ..bank import Bank
+    from ..normalise import normalise
+    from ..preview import preview_sheet, save_png
+
+    check_png(args.output)
+    bank = Bank.load(args.bank)
+    if args.normalised:
+        nb = normalise(bank)
+        images, lines = nb.images, nb.lines
+    else:
+        images, lines = bank.images, bank.lines
+    named = {v: {n: lines[v][i] for i, n in enumerate(bank.line_names)} for v in bank.names}
+    save_png(args.output, preview_sheet({v: images[v] for v in bank.names}, named, tile=SHEET_TILE))
+    return 0

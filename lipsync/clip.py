@@ -1,0 +1,223 @@
+"""One clip end to end: a timeline (or audio) and a bank in, an mp4 or PNG frames out.
+
+The stages in order (DESIGN.md), shared by ``lipsync render``, ``lipsync batch`` and
+``lipsync serve`` so that every entry point makes the same file from the same inputs::
+
+    Bank.load -> FlowStore -> Animator (read, map, sequence) -> preprocess (missing flows)
+    -> Renderer frames -> open_writer (ffmpeg) -> OUT (renamed into place when complete)
+
+Examples
+--------
+>>> import os, tempfile
+>>> from lipsync.clip import render_clip
+>>> d = tempfile.mkdtemp()
+>>> tl = os.path.join(d, "a.tsv")
+>>> _ = open(tl, "w").write("0.00\tX\n0.20\tD\n0.60\tX\n")
+>>> report = render_clip(tl, os.path.join(d, "frames"), format="png", quiet=True)
+>>> report.frames, sorted(os.listdir(os.path.join(d, "frames")))[:2]
+(15, ['000000.png', '000001.png'])
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from dataclasses import dataclass
+from typing import Optional, Union
+
+from .timing import DEFAULT_CURVE
+
+PathLike = Union[str, "os.PathLike[str]"]
+
+#: 25 fps is PAL video's rate and enough for lips (Rhubarb needs >= 24 for hard cuts;
+#: morphs look smooth well below that, so lower rates are allowed).
+DEFAULT_FPS = 25.0
+#: crf 18 is visually lossless for drawn faces; "veryfast" keeps encoding well ahead of
+#: real time on two cores at 512x512 (the flat colours compress well at any preset).
+DEFAULT_CRF = 18
+DEFAULT_PRESET = "veryfast"
+
+
+@dataclass(frozen=True)
+class ClipReport:
+    """What :func:`render_clip` made.
+
+    Attributes
+    ----------
+    output : str
+        The file or folder written.
+    frames : int
+        Frames rendered.
+    fps : float
+        Frame rate.
+    size : (int, int)
+        Width and height.
+    method : str
+        Renderer method.
+    seconds_setup, seconds_render : float
+        Wall time loading and sequencing (and computing missing flows), then rendering and
+        encoding.
+    """
+
+    output: str
+    frames: int
+    fps: float
+    size: tuple
+    method: str
+    seconds_setup: float
+    seconds_render: float
+
+    @property
+    def duration(self) -> float:
+        """Seconds of video."""
+        return self.frames / self.fps
+
+    def summary(self) -> str:
+        """One line for people: frames, size, method, speed."""
+        w, h = self.size
+        rt = self.duration / max(self.seconds_render, 1e-9)
+        return (f"wrote {self.output}: {self.frames} frames ({self.duration:.2f} s at {self.fps:g} fps), "
+                f"{w}x{h}, {self.method}; rendered and encoded in {self.seconds_render:.2f} s "
+                f"({rt:.1f}x real time), total {self.seconds_setup + self.seconds_render:.2f} s")
+
+
+#: Frames rendered ahead of the encoder. A few are enough to keep both busy; each is one
+#: frame of memory (0.8 MB at 512x512), so memory stays flat however long the clip.
+QUEUE_FRAMES = 8
+
+
+def write_overlapped(frames, write) -> None:
+    """Feed ``frames`` to ``write`` from a second thread, so rendering overlaps encoding.
+
+    Writing blocks while ffmpeg encodes; OpenCV, numpy and the pipe write all release the
+    GIL, so the renderer keeps working meanwhile. Frames are copied into a ring of
+    :data:`QUEUE_FRAMES` buffers (the renderer reuses its own). An error in the writer
+    stops the renderer and is re-raised here; an error in the renderer stops the writer.
+    """
+    import queue
+    import threading
+
+    import numpy as np
+
+    q: "queue.Queue" = queue.Queue(maxsize=QUEUE_FRAMES - 2)
+    free: "queue.Queue" = queue.Queue()
+    failure: list = []
+    stop = threading.Event()
+
+    def consume():
+        try:
+            while True:
+                buf = q.get()
+                if buf is None:
+                    return
+                write(buf)
+                free.put(buf)
+        except BaseException as exc:  # handed to the main thread
+            failure.append(exc)
+            stop.set()
+
+    worker = threading.Thread(target=consume, name="lipsync-encode", daemon=True)
+    worker.start()
+
+    def hand_over(item) -> bool:
+        # put, but give up if the writer has died (its queue would never drain)
+        while worker.is_alive():
+            try:
+                q.put(item, timeout=0.1)
+                return True
+            except queue.Full:
+                continue
+        return False
+
+    made = 0
+    try:
+        for frame in frames:
+            if stop.is_set():
+                break
+            buf = None
+            while buf is None and not stop.is_set():
+                try:
+                    buf = free.get(timeout=0.1) if made >= QUEUE_FRAMES else free.get_nowait()
+                except queue.Empty:
+                    if made < QUEUE_FRAMES:
+                        buf = np.empty_like(frame)
+                        made += 1
+            if buf is None or not hand_over(np.copyto(buf, frame) or buf):
+                break
+    finally:
+        hand_over(None)
+        worker.join()
+    if failure:
+        raise failure[0]
+
+
+def render_clip(timeline, output: PathLike, *, bank=None, audio: Optional[PathLike] = None,
+                fps: float = DEFAULT_FPS, map=None, method: str = "flow", timing=DEFAULT_CURVE,
+                format: Optional[str] = None, crf: int = DEFAULT_CRF, preset: str = DEFAULT_PRESET,
+                store=None, jobs: Optional[int] = None, quiet: bool = False,
+                timeline_options=None) -> ClipReport:
+    """Render one clip to ``output`` (an mp4, or a folder of numbered PNGs).
+
+    Parameters
+    ----------
+    timeline : Timeline or path-like
+        Any timeline the readers understand (see :func:`lipsync.read_timeline`).
+    output : path-like
+        The mp4 file or PNG folder; written under a temporary name and renamed when
+        complete, so a failure or Ctrl-C leaves nothing there.
+    bank : Bank or path-like, optional
+        The subject (default: the shipped toon).
+    audio : path-like, optional
+        Speech to mux (mp4 only).
+    fps, map, method, timing
+        As for :class:`lipsync.Animator`.
+    format : str, optional
+        ``mp4`` or ``png`` (default: from ``output``).
+    crf, preset
+        x264 quality and speed preset.
+    store : FlowStore or path-like, optional
+        Flow store (default: the bank's own). Missing flows are computed first.
+    jobs : int, optional
+        Processes for computing missing flows.
+    quiet : bool
+        No progress bars.
+    timeline_options : object, optional
+        Reader options (attributes ``timeline_format``, ``tier``, ``sample_rate``,
+        ``moho_fps``) when ``timeline`` is a path.
+
+    Returns
+    -------
+    ClipReport
+    """
+    from tqdm import tqdm
+
+    from ._data import default_bank_dir
+    from .animator import Animator
+    from .bank import Bank
+    from .encode import format_for, open_writer
+    from .errors import InputError
+    from .preprocess import preprocess
+    from .store import FlowStore
+
+    t0 = time.perf_counter()
+    if not 0 <= crf <= 51:
+        raise InputError(f"--crf must be 0..51, got {crf}")
+    out_format = format or format_for(output)  # an unknown extension fails before any work
+    if not isinstance(bank, Bank):
+        bank = Bank.load(bank or default_bank_dir())
+    if not isinstance(store, FlowStore):
+        store = FlowStore.for_bank(bank, store)
+    anim = Animator(bank, timeline, fps=fps, map=map, method=method, timing=timing, store=store,
+                    timeline_options=timeline_options)
+    if method in ("flow", "splat"):
+        preprocess(bank, store=store, jobs=jobs, quiet=quiet, normalised=anim.renderer.nb)
+    h, w = anim.renderer.shape
+    t1 = time.perf_counter()
+    with open_writer(output, fps=fps, size=(w, h), format=out_format, audio=audio,
+                     crf=crf, preset=preset, quiet=True) as writer:
+        frames = tqdm(anim.frames(copy=False), total=len(anim), desc="render", unit="frame",
+                      disable=quiet, leave=False)
+        write_overlapped(frames, writer.write)
+    t2 = time.perf_counter()
+    return ClipReport(output=str(output), frames=len(anim), fps=float(fps), size=(w, h), method=method,
+                      seconds_setup=t1 - t0, seconds_render=t2 - t1)
