@@ -30,7 +30,6 @@ Examples
 
 from __future__ import annotations
 
-import difflib
 import functools
 import os
 import re
@@ -76,6 +75,8 @@ BOUNDARY_OFFSET_S = 0.0
 
 #: Below this confidence a transcript is reported as not fitting the audio.
 LOW_CONFIDENCE = 0.5
+#: Share of a long transcript's words that may go unfound without a warning.
+SKIPPED_SHARE_OK = 0.08
 #: Frames within this many dB of the loudest are counted as speech by the confidence check:
 #: vowels and voiced consonants sit within 25 dB of a recording's peak, breaths and room
 #: noise in pauses below it.
@@ -163,6 +164,10 @@ def _ensure_words(decoder, words: Sequence[str]) -> None:
 
 
 def _decode(decoder, pcm: np.ndarray) -> None:
+    # Fresh feature state for every utterance: pocketsphinx's noise removal carries its noise
+    # estimate over from the previous utterance, so without this the same audio decoded
+    # twice (or after another chunk) gave different words.
+    decoder.reinit_feat()
     decoder.start_utt()
     decoder.process_raw(np.ascontiguousarray(pcm, dtype=np.int16).tobytes(), full_utt=True)
     decoder.end_utt()
@@ -256,25 +261,44 @@ def _force_align(pcm: np.ndarray, words: Sequence[str]) -> Optional[List[_WordTi
 SKIP_PROB = 0.02
 
 
-def _fitting_words(pcm: np.ndarray, words: Sequence[str]) -> List[str]:
-    """The transcript words that fit the audio, found by a search that may skip any word.
+#: In a window search (:func:`_fitting_words` with ``prefix=True``), the probability of
+#: ending after any word: small, so that the search prefers to use words over leaving them.
+END_PROB = 1e-4
+
+
+def _fitting_words(pcm: np.ndarray, words: Sequence[str], *, prefix: bool = False) -> List[int]:
+    """Indices of the transcript words that fit the audio, found by a search that may skip any word.
 
     A grammar in which every word is optional (with :data:`SKIP_PROB`) keeps the order of
     the transcript but lets words that are not spoken fall out; extra speech is absorbed by
-    pocketsphinx's noise and silence fillers.
+    pocketsphinx's noise and silence fillers. With ``prefix``, the grammar may also end
+    after any word: the words of a long transcript that this stretch of audio holds.
     """
+    if not words:
+        return []
     d = _aligner()
     _ensure_words(d, words)
+    n = len(words)
     transitions = []
     for i, w in enumerate(words):
         transitions += [(i, i + 1, 1.0 - SKIP_PROB, w), (i, i + 1, SKIP_PROB)]
+        if prefix and i > 0:
+            transitions.append((i, n, END_PROB))
     try:
-        d.add_fsg("fit", d.create_fsg("fit", 0, len(words), transitions))
+        d.add_fsg("fit", d.create_fsg("fit", 0, n, transitions))
         d.activate_search("fit")
         _decode(d, pcm)
-        return [w for w in (_VARIANT.sub("", s.word).lower() for s in d.seg()) if w not in _NON_SPEECH_WORDS]
+        heard = [w for w in (_VARIANT.sub("", s.word).lower() for s in d.seg()) if w not in _NON_SPEECH_WORDS]
     except (RuntimeError, ValueError, TypeError):
         return []
+    kept, i = [], 0
+    for w in heard:  # the grammar keeps order, so each heard word is the next such word
+        while i < n and words[i] != w:
+            i += 1
+        if i < n:
+            kept.append(i)
+            i += 1
+    return kept
 
 
 def _align_words(pcm: np.ndarray, words: Sequence[str]) -> Tuple[Optional[List[_WordTiming]], int]:
@@ -282,7 +306,7 @@ def _align_words(pcm: np.ndarray, words: Sequence[str]) -> Tuple[Optional[List[_
     got = _force_align(pcm, words)
     if got is not None or not words:
         return got, 0
-    kept = _fitting_words(pcm, words)
+    kept = [words[i] for i in _fitting_words(pcm, words)]
     got = _force_align(pcm, kept) if kept else None
     return got, len(words) - len(kept)
 
@@ -324,10 +348,8 @@ def _even_phones(word: str, start: int, end: int) -> _WordTiming:
 
 
 def _chunk_job(job):
-    """One chunk's work: ("recognise", pcm) or ("align", pcm, words). Runs in a worker process."""
-    if job[0] == "recognise":
-        return _recognise(job[1])
-    return _align_words(job[1], job[2])
+    """One chunk's work, ("recognise", pcm): runs in a worker process."""
+    return _recognise(job[1])
 
 
 def _run_jobs(jobs: list, workers: int, bar) -> list:
@@ -356,31 +378,42 @@ def _run_jobs(jobs: list, workers: int, bar) -> list:
     return results
 
 
-def _share_words(transcript: Sequence[str], heard: Sequence[Sequence[str]]) -> List[List[str]]:
-    """Share the transcript's words among chunks by matching them to the words heard in each.
+#: A chunk of a long transcribed recording is searched for the next words of the transcript
+#: in a window of this many times the words expected at the recording's speaking rate, plus
+#: :data:`WINDOW_MARGIN` words: room for a speaker who speeds up, without making the search
+#: (and its time) grow with the transcript.
+WINDOW_FACTOR = 2.0
+WINDOW_MARGIN = 20
 
-    Matched words go to the chunk they were heard in; unmatched ones go with the matched
-    word before them (or, at the start, after them), so word order is kept.
+
+def _align_long(piece, chunks, transcript, energy, bar):
+    """Align a long transcript chunk by chunk, each taking the next words that fit it.
+
+    Returns (timings per chunk, words skipped, words that could not be aligned).
     """
-    flat = [(w, c) for c, ws in enumerate(heard) for w in ws]
-    owner: List[Optional[int]] = [None] * len(transcript)
-    sm = difflib.SequenceMatcher(None, list(transcript), [w for w, _ in flat], autojunk=False)
-    for a, b, size in sm.get_matching_blocks():
-        for k in range(size):
-            owner[a + k] = flat[b + k][1]
-    last = next((o for o in owner if o is not None), 0)
-    shared: List[List[str]] = [[] for _ in heard]
-    for w, o in zip(transcript, owner):
-        last = o if o is not None and o >= last else last
-        shared[last].append(w)
-    return shared
-
-
-def _heard_share(transcript: Sequence[str], heard: Sequence[str]) -> float:
-    if not transcript:
-        return 1.0
-    sm = difflib.SequenceMatcher(None, list(transcript), list(heard), autojunk=False)
-    return sum(size for _, _, size in sm.get_matching_blocks()) / len(transcript)
+    loud = energy > max(float(energy.max()) - SPEECH_BELOW_PEAK_DB, SILENCE_DBFS)
+    rate = len(transcript) / max(float(loud.sum()) * FRAME_S, 1.0)  # words per second of speech
+    bar.total = len(chunks)
+    bar.refresh()
+    per_chunk, pointer, skipped, failed = [], 0, 0, 0
+    for i, (a, b) in enumerate(chunks):
+        last = i == len(chunks) - 1
+        speech_s = float(loud[a:b].sum()) * FRAME_S
+        size = len(transcript) if last else int(WINDOW_FACTOR * rate * speech_s) + WINDOW_MARGIN
+        window = transcript[pointer: pointer + size]
+        kept_at = _fitting_words(piece(a, b), window, prefix=not last)
+        consumed = kept_at[-1] + 1 if kept_at else 0
+        skipped += consumed - len(kept_at)
+        pointer += consumed
+        kept = [window[j] for j in kept_at]
+        got = _force_align(piece(a, b), kept) if kept else []
+        if got is None:
+            failed += len(kept)
+            got = []
+        per_chunk.append(got)
+        bar.update()
+    skipped += len(transcript) - pointer
+    return per_chunk, skipped, failed
 
 
 # --- the public functions -------------------------------------------------------------------
@@ -478,32 +511,24 @@ def align_samples(pcm: np.ndarray, text: Optional[str] = None, *, quiet: bool = 
         whole = None
         if has_text and duration <= MAX_CHUNK_S:
             whole, skipped = _align_words(pcm, transcript)
+        strict_failed = has_text and skipped > 0
         if whole is not None:
             timings = whole
             bar.update()
         else:
-            # Recognise chunk by chunk (in parallel); with a transcript, share its words out
-            # among the chunks and align each chunk's share, keeping the recognised words
-            # where a share does not fit.
-            chunks = _plan_chunks(energy, RECOGNITION_CHUNK_S if not has_text or duration <= MAX_CHUNK_S
-                                  else MAX_CHUNK_S)
-            bar.total = len(chunks) * (2 if has_text else 1)
-            bar.refresh()
-            # Worker processes pay a model load each (~0.5 s): worth it from a few chunks on.
-            workers = workers if len(chunks) >= MIN_CHUNKS_FOR_WORKERS else 1
-            recognised = _run_jobs([("recognise", piece(a, b)) for a, b in chunks], workers, bar)
-            per_chunk = [t for _, t in recognised]
-            if has_text:
-                shares = _share_words(transcript, [h for h, _ in recognised])
-                aligned = _run_jobs([("align", piece(a, b), share) for (a, b), share in zip(chunks, shares)],
-                                    workers, bar)
-                skipped = 0
-                for i, (got, skip) in enumerate(aligned):
-                    if got is None:
-                        failed += len(shares[i])
-                    else:
-                        per_chunk[i] = got
-                        skipped += skip
+            if has_text and duration > MAX_CHUNK_S:
+                chunks = _plan_chunks(energy, MAX_CHUNK_S)
+                per_chunk, skipped, failed = _align_long(piece, chunks, transcript, energy, bar)
+            else:
+                # No transcript, or a short one that does not fit at all: recognise chunk by
+                # chunk (in parallel when there are enough), then align what was heard.
+                chunks = _plan_chunks(energy, RECOGNITION_CHUNK_S)
+                bar.total = len(chunks)
+                bar.refresh()
+                # Worker processes pay a model load each (~0.5 s): worth it from a few chunks on.
+                workers = workers if len(chunks) >= MIN_CHUNKS_FOR_WORKERS else 1
+                per_chunk = [t for _, t in _run_jobs([("recognise", piece(a, b)) for a, b in chunks], workers, bar)]
+                failed, skipped = len(transcript), 0
             for (a, _), got in zip(chunks, per_chunk):
                 timings += [(w, ws + a, we + a, [(p, ps + a, pe + a) for p, ps, pe in ph])
                             for w, ws, we, ph in got]
@@ -514,7 +539,10 @@ def align_samples(pcm: np.ndarray, text: Optional[str] = None, *, quiet: bool = 
     if has_text:
         fitted = 1.0 - (failed + skipped) / len(transcript)
         confidence = min(fitted, _speech_in_words(energy, timings))
-        if failed or skipped or confidence < LOW_CONFIDENCE:
+        # In a long recording a few words at chunk cuts may go unfound even when the
+        # transcript is right (12 of 236 on the MFA recording four times over), so there
+        # only a larger share counts as not fitting.
+        if failed or strict_failed or skipped > SKIPPED_SHARE_OK * len(transcript) or confidence < LOW_CONFIDENCE:
             what = "does not fit the audio"
             if skipped:
                 what += f": {skipped} of its {len(transcript)} words were not found and were left out"
