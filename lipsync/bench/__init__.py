@@ -79,11 +79,9 @@ def peak_mb(fn: Callable[[], object]) -> float:
 
 def _table(rows: List[dict]) -> str:
     lines = []
-    for fig in ("beier_neely_field", "frame", "end_to_end", "store"):
+    for fig in dict.fromkeys(r["figure"] for r in rows):  # every figure, in the order run
         sel = [r for r in rows if r["figure"] == fig]
-        if not sel:
-            continue
-        keys = [k for k in sel[0] if k != "figure"]
+        keys = list(dict.fromkeys(k for r in sel for k in r if k != "figure"))
         widths = [max(len(k), *(len(str(r.get(k, ""))) for r in sel)) for k in keys]
         lines.append(f"\n## {fig}")
         lines.append("  ".join(k.ljust(w) for k, w in zip(keys, widths)))
