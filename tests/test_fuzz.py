@@ -164,6 +164,8 @@ SEED_FILES: Dict[str, List[Path]] = {
     "moho": _files("tests/data/timelines/*.dat"),
     "timit": _files("samples/*.phn", "tests/data/timelines/timit_*.PHN", "tests/data/timelines/timit_*.phn"),
     "audacity": _files("samples/*.txt", "tests/data/timelines/audacity_*.txt"),
+    # Speech audio: only the short silent golden file, so mutants stay quick to decode.
+    "audio": _files("tests/data/timelines/silence.wav"),
 }
 #: Known-bad golden inputs: good material for mutations of any format.
 ERROR_FILES = [p for p in _files("tests/data/timelines/error_*") if not p.name.endswith(".error")]
@@ -173,10 +175,11 @@ ALL_SEEDS: List[bytes] = [b for bs in SEEDS.values() for b in bs] + [p.read_byte
 #: Extensions and aliases each format is documented to answer to (lipsync/readers/*).
 EXTENSIONS = {"textgrid": [".TextGrid", ".textgrid"], "gentle": [".json"], "rhubarb-tsv": [".tsv"],
               "rhubarb-json": [".json"], "rhubarb-xml": [".xml"], "moho": [".dat"],
-              "timit": [".phn", ".PHN"], "audacity": [".txt", ".labels"]}
+              "timit": [".phn", ".PHN"], "audacity": [".txt", ".labels"],
+              "audio": [".wav", ".flac", ".mp3", ".m4a", ".ogg"]}
 ALIASES = {"textgrid": ["praat", "mfa", "TextGrid"], "gentle": ["GENTLE"], "rhubarb-tsv": ["tsv"],
            "rhubarb-json": ["Rhubarb-JSON"], "rhubarb-xml": ["xml"], "moho": ["dat", "papagayo"],
-           "timit": ["phn"], "audacity": ["labels"]}
+           "timit": ["phn"], "audacity": ["labels"], "audio": ["AUDIO"]}
 ALL_EXTENSIONS = sorted({e for es in EXTENSIONS.values() for e in es}) + [".lab", ".bin", ".yaml", ""]
 
 

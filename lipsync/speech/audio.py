@@ -21,7 +21,7 @@ from typing import Union
 
 import numpy as np
 
-from ..errors import InputError
+from ..errors import TimelineError
 
 PathLike = Union[str, "os.PathLike[str]"]
 
@@ -37,8 +37,12 @@ AUDIO_EXTENSIONS = (".wav", ".wave", ".flac", ".mp3", ".m4a", ".aac", ".ogg", ".
 _STDERR_TAIL = 300
 
 
-class AudioError(InputError):
-    """An audio file that cannot be read (the message names the file)."""
+class AudioError(TimelineError):
+    """An audio file that cannot be read (the message names the file).
+
+    A :class:`~lipsync.errors.TimelineError` (so an :class:`~lipsync.errors.InputError`):
+    audio is read as a timeline by ``lipsync render`` and the other timeline commands.
+    """
 
 
 def _ffmpeg_exe() -> str:
