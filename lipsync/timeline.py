@@ -155,12 +155,14 @@ _OVERLAP_TOLERANCE_S = 1e-4
 @dataclass(frozen=True)
 class ReadOptions:
     """What a reader may need besides the file: chosen tier, TIMIT sample rate, Moho frame rate,
-    and an audio file's transcript (``text``: the text or a file holding it)."""
+    an audio file's transcript (``text``: the text or a file holding it), and whether reading
+    (aligning audio) may show a progress bar (``quiet=False``)."""
 
     tier: Optional[str] = None
     sample_rate: float = 16000
     fps: float = 24.0
     text: Optional[str] = None
+    quiet: bool = True
 
 
 @dataclass(frozen=True)
@@ -183,7 +185,8 @@ _SNIFF_BYTES = 4096
 
 
 def read_timeline(path: PathLike, format: Optional[str] = None, *, tier: Optional[str] = None,
-                  sample_rate: float = 16000, fps: float = 24.0, text: Optional[str] = None) -> Timeline:
+                  sample_rate: float = 16000, fps: float = 24.0, text: Optional[str] = None,
+                  quiet: bool = True) -> Timeline:
     """Read a phoneme or viseme timeline from any supported file.
 
     Parameters
@@ -200,6 +203,8 @@ def read_timeline(path: PathLike, format: Optional[str] = None, *, tier: Optiona
         Frame rate of a Moho switch ``.dat`` file (frames are 1-based).
     text : str, optional
         For audio: its transcript, or a file holding it (default: the words are recognised).
+    quiet : bool
+        For audio: no progress bar while aligning.
 
     Returns
     -------
@@ -243,7 +248,7 @@ def read_timeline(path: PathLike, format: Optional[str] = None, *, tier: Optiona
         raise TimelineError("empty file", path=name, line=1)
     if reader is None:
         reader = _choose_reader(name, data)
-    options = ReadOptions(tier=tier, sample_rate=float(sample_rate), fps=float(fps), text=text)
+    options = ReadOptions(tier=tier, sample_rate=float(sample_rate), fps=float(fps), text=text, quiet=bool(quiet))
     return reader.read(name, data, options)
 
 

@@ -114,7 +114,7 @@ def load_viseme_timeline(args: argparse.Namespace, *, rest: Optional[str] = None
                              tier=getattr(args, "tier", None),
                              sample_rate=getattr(args, "sample_rate", 16000),
                              fps=getattr(args, "moho_fps", DEFAULT_MOHO_FPS),
-                             text=getattr(args, "text", None))
+                             text=getattr(args, "text", None), quiet=getattr(args, "quiet", True))
     map_arg = str(getattr(args, "map", None) or "")
     return bank_viseme_timeline(timeline, pmap, viseme_names, rest=rest,
                                 map_path=map_arg if os.path.isfile(map_arg) else None)
