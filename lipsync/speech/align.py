@@ -143,11 +143,18 @@ class Alignment:
 
 # --- decoders (one of each kind per process, loading the model takes ~0.5 s) --------------
 
+#: Forced-alignment settings. topn is how many Gaussians of each senone's mixture are scored
+#: per frame: pocketsphinx's default of 4 is tuned for recognition speed; 8 brought the mean
+#: boundary error against MFA from 18.9 to 17.7 ms (and frames with MFA's mouth shape from
+#: 87.1 to 87.9%) for 30% more CPU; 16 and 32 were no better.
+ALIGNER_SETTINGS = dict(topn=8)
+
+
 @functools.lru_cache(maxsize=1)
 def _aligner():
     from pocketsphinx import Decoder
 
-    return Decoder(lm=None, loglevel="FATAL")
+    return Decoder(lm=None, loglevel="FATAL", **ALIGNER_SETTINGS)
 
 
 @functools.lru_cache(maxsize=1)
