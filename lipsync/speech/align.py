@@ -130,6 +130,13 @@ class Alignment:
         For a transcript: the share of its words that fit the audio (0..1).
     missing : tuple of str
         Transcript words that needed the letter-to-sound fallback.
+
+    Examples
+    --------
+    >>> from lipsync.timeline import Segment, Timeline
+    >>> al = Alignment(Timeline((Segment(0.1, 0.4, "hi"),)), Timeline((Segment(0.1, 0.4, "AY1"),)), 0.5)
+    >>> al.words.labels(), round(al.phones[0].duration, 2)
+    (['hi'], 0.3)
     """
 
     words: Timeline

@@ -46,6 +46,15 @@ def to_textgrid(alignment) -> str:
     """Praat long-text TextGrid with tiers ``words`` and ``phones`` covering the whole audio.
 
     Silence is an empty interval, so each tier's intervals tile 0..duration as Praat expects.
+
+    Examples
+    --------
+    >>> from lipsync.timeline import Segment, Timeline
+    >>> from lipsync.speech.align import Alignment
+    >>> al = Alignment(Timeline((Segment(0.1, 0.4, "hi"),)), Timeline((Segment(0.1, 0.4, "AY1"),)), 0.5)
+    >>> text = to_textgrid(al)
+    >>> text.count("intervals [3]:"), 'text = "AY1"' in text
+    (2, True)
     """
     end = float(alignment.duration)
     out = ['File type = "ooTextFile"', 'Object class = "TextGrid"', "", "xmin = 0", f"xmax = {end!r}",
@@ -68,7 +77,17 @@ def to_textgrid(alignment) -> str:
 
 
 def to_json(alignment) -> str:
-    """JSON: ``duration``, ``words`` and ``phones`` (each ``{label, start, end}``), and how they were made."""
+    """JSON: ``duration``, ``words`` and ``phones`` (with ``start`` and ``end``), and how they were made.
+
+    Examples
+    --------
+    >>> import json
+    >>> from lipsync.timeline import Segment, Timeline
+    >>> from lipsync.speech.align import Alignment
+    >>> al = Alignment(Timeline((Segment(0.1, 0.4, "hi"),)), Timeline((Segment(0.1, 0.4, "AY1"),)), 0.5)
+    >>> json.loads(to_json(al))["phones"]
+    [{'phone': 'AY1', 'start': 0.1, 'end': 0.4}]
+    """
     doc = {
         "duration": alignment.duration,
         "recognised": alignment.recognised,
@@ -96,6 +115,17 @@ def write_alignment(alignment, path: PathLike, format: Optional[str] = None) -> 
         Destination file.
     format : str, optional
         ``textgrid`` or ``json`` (default: from the extension, else textgrid).
+
+    Examples
+    --------
+    >>> import os, tempfile
+    >>> from lipsync.timeline import Segment, Timeline
+    >>> from lipsync.speech.align import Alignment
+    >>> al = Alignment(Timeline((Segment(0.1, 0.4, "hi"),)), Timeline((Segment(0.1, 0.4, "AY1"),)), 0.5)
+    >>> d = tempfile.mkdtemp()
+    >>> write_alignment(al, os.path.join(d, "hi.json"))
+    >>> os.listdir(d)
+    ['hi.json']
     """
     name = os.fspath(path)
     if format is None:
