@@ -248,3 +248,23 @@ def test_animator_from_audio(rhubarb_bank):
     assert len(anim) == int(np.ceil(47473 / 16000 * 30))
     assert anim.alignment.words.labels() == HELLO_WORDS
     assert anim.frame(0).shape[2] == 3
+
+
+def test_workers_are_forked_only_from_a_single_threaded_main():
+    import threading
+
+    from lipsync.speech.align import _can_fork
+
+    seen = []
+    worker = threading.Thread(target=lambda: seen.append(_can_fork()))
+    worker.start()
+    worker.join()
+    assert seen == [False]  # from a thread (a server's request handler): decode in-process
+    idle = threading.Event()
+    other = threading.Thread(target=idle.wait)
+    other.start()
+    try:
+        assert not _can_fork()  # another thread alive: a fork could copy its held locks
+    finally:
+        idle.set()
+        other.join()

@@ -85,8 +85,8 @@ SPEECH_BELOW_PEAK_DB = 25.0
 #: the MFA recording 6 s chunks gave 76.6% of frames the right mouth shape, 10 s 79.9%,
 #: 14 s 82.6%; 15 s still splits half a minute of speech between two cores.
 RECOGNITION_CHUNK_S = 15.0
-#: From this many chunks on, they are decoded in worker processes: a worker's model load
-#: (about 0.5 s of CPU) is small against 15 s of recognition (about 5 s of CPU).
+#: From this many chunks on, they are decoded in worker processes: a worker's start and
+#: model load (about 1 s) is small against 15 s of recognition (about 4 s of CPU).
 MIN_CHUNKS_FOR_WORKERS = 2
 
 # pocketsphinx's names for silence and noise: words and phones that are not speech.
@@ -366,9 +366,31 @@ def _chunk_job(job):
     return _recognise(job[1])
 
 
+def _can_fork() -> bool:
+    """True if worker processes may be forked: a POSIX main thread with no other threads.
+
+    Forking copies only the calling thread, so a lock another thread holds (a server's, a
+    logging handler's) stays locked in the child forever. tqdm's monitor thread is allowed:
+    the children never touch tqdm. spawn and forkserver are not used instead because they
+    re-run the caller's main script in each worker, which breaks scripts that embed lipsync
+    without an ``if __name__ == "__main__"`` guard.
+    """
+    import multiprocessing
+    import threading
+
+    from tqdm import tqdm
+
+    if "fork" not in multiprocessing.get_all_start_methods():
+        return False
+    if threading.current_thread() is not threading.main_thread():
+        return False
+    monitor = getattr(tqdm, "monitor", None)
+    return all(t is threading.main_thread() or t is monitor for t in threading.enumerate())
+
+
 def _run_jobs(jobs: list, workers: int, bar) -> list:
-    """Results of :func:`_chunk_job` in order, in ``workers`` processes when it pays."""
-    if workers <= 1 or len(jobs) <= 1:
+    """Results of :func:`_chunk_job` in order, in ``workers`` processes when it pays and is safe."""
+    if workers <= 1 or len(jobs) <= 1 or not _can_fork():
         out = []
         for job in jobs:
             out.append(_chunk_job(job))
@@ -377,12 +399,11 @@ def _run_jobs(jobs: list, workers: int, bar) -> list:
     import multiprocessing
     from concurrent.futures import ProcessPoolExecutor
 
-    # fork: workers start in milliseconds and inherit the imported modules; each loads its
-    # own decoder (pocketsphinx decoders are not shared between processes).
-    method = "fork" if "fork" in multiprocessing.get_all_start_methods() else "spawn"
+    # Forked workers start in milliseconds with the modules (and any decoder this process
+    # already loaded) in place; pocketsphinx decoders are not shared, each has its copy.
+    context = multiprocessing.get_context("fork")
     results: list = [None] * len(jobs)
-    with ProcessPoolExecutor(max_workers=min(workers, len(jobs)),
-                             mp_context=multiprocessing.get_context(method)) as pool:
+    with ProcessPoolExecutor(max_workers=min(workers, len(jobs)), mp_context=context) as pool:
         futures = {pool.submit(_chunk_job, job): i for i, job in enumerate(jobs)}
         from concurrent.futures import as_completed
 
