@@ -183,6 +183,8 @@ def test_unreadable_audio_exit_2_naming_the_file(tmp_path):
         assert not out.exists() and not list(tmp_path.glob(".lipsync-*"))
     r = lipsync("render", bad, "-o", tmp_path / "x.mp4", "--method", "dissolve")
     assert r.returncode == 2 and str(bad) in r.stderr
+    r = lipsync("align", HELLO_WAV, "-o", tmp_path / "no" / "such" / "out.TextGrid")
+    assert r.returncode == 2 and "out.TextGrid" in r.stderr and "folder" in r.stderr
 
 
 def test_empty_transcript_means_none(tmp_path):

@@ -30,6 +30,13 @@ def run(args: argparse.Namespace) -> int:
     from ..speech.align import align
     from ..speech.export import write_alignment
 
+    import os
+
+    from ..errors import InputError
+
+    folder = os.path.dirname(os.path.abspath(args.output))
+    if not os.path.isdir(folder):  # before the work, not after it
+        raise InputError("the output's folder does not exist", path=args.output)
     t0 = time.perf_counter()
     alignment = align(args.audio, args.text, quiet=args.quiet)
     write_alignment(alignment, args.output, args.format)
