@@ -18,11 +18,8 @@ Examples
 >>> out = os.path.join(tempfile.mkdtemp(), "cues.tsv")
 >>> write_cues(cues, out)
 'rhubarb-tsv'
->>> print(open(out).read(), end="")
-0.000	X
-0.200	A
-0.500	X
-0.800	X
+>>> open(out).read().splitlines()
+['0.000\\tX', '0.200\\tA', '0.500\\tX', '0.800\\tX']
 >>> read_timeline(out).labels()
 ['X', 'A', 'X']
 """
