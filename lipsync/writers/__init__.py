@@ -26,7 +26,6 @@ Examples
 
 from __future__ import annotations
 
-import importlib
 import math
 import os
 from dataclasses import dataclass, field
@@ -89,9 +88,6 @@ class Writer:
 
 WRITERS: Registry[Writer] = Registry("cue format")
 
-MODULES = ["rhubarb", "moho", "textgrid", "audacity"]
-
-
 def cue_track(cues: Union[Timeline, Sequence[Cue]], *, rest: str,
               duration: Optional[float] = None) -> Tuple[List[Cue], float]:
     """Contiguous cues covering ``[0, duration]``: gaps become ``rest``, empty cues go.
@@ -144,7 +140,6 @@ def format_for(path: PathLike) -> str:
     >>> format_for("cues.json"), format_for("song.DAT"), format_for("a.TextGrid")
     ('rhubarb-json', 'moho', 'textgrid')
     """
-    load_all()
     ext = Path(os.fspath(path)).suffix
     name = WRITERS.name_for_extension(ext)
     if name is None:
@@ -205,7 +200,6 @@ def write_cues(cues: Union[Timeline, Sequence[Cue]], path: PathLike, format: Opt
     """
     from ..store import atomic_write_bytes
 
-    load_all()
     name = format_for(path) if format is None else format
     writer = WRITERS.get(name)
     if fps is None or not (0 < float(fps) < float("inf")):
@@ -219,17 +213,5 @@ def write_cues(cues: Union[Timeline, Sequence[Cue]], path: PathLike, format: Opt
     return writer.name
 
 
-_loaded = False
-
-
-def load_all() -> None:
-    """Import every writer module once (each registers itself in :data:`WRITERS`)."""
-    global _loaded
-    if _loaded:
-        return
-    _loaded = True
-    for module in MODULES:
-        importlib.import_module(f".{module}", __name__)
-
-
-load_all()
+# Each writer module registers itself; imported last because they import from this module.
+from . import rhubarb, moho, textgrid, audacity  # noqa: E402,F401  (registration order = --format choices)
