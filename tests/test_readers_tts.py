@@ -282,3 +282,43 @@ def test_cues_from_polly_marks(tmp_path):
     # By hand from the marks: lips closed for M (6-73 ms) and for the M of "lamb" (1082 ms on).
     assert cues.labels()[1] == "A" and cues[1].start == pytest.approx(0.006)
     assert [s for s in cues if s.label == "A"][-1].start == pytest.approx(1.082)
+
+
+# --- the split against real phone times ----------------------------------------------------------
+
+
+def _shape_frames(tl, duration, step=0.01):
+    from lipsync.phonemes import map_timeline
+
+    n = int(duration / step)
+    out = ["X"] * n
+    for s in map_timeline(tl, load_map("rhubarb")):
+        a, b = int(round(s.start / step)), min(n, int(round(s.end / step)))
+        out[a:b] = [s.label] * max(0, b - a)
+    return out
+
+
+def test_word_split_against_mfa_phone_times():
+    """MFA's own word times in, its phone times as the reference (26.7 s of real speech).
+
+    Measured: 81.6 % of 10 ms frames show the same Rhubarb shape as MFA's phones (80.7 % with
+    an equal split of each word), inner phone boundaries 44 ms off on average (47 ms equal).
+    """
+    grid = Path(__file__).parent / "data" / "conformance" / "mfa" / "acoustic_corpus.TextGrid"
+    words, phones = read_timeline(grid, tier="words"), read_timeline(grid, tier="phones")
+    mine = words_to_phones(words)
+    equal = Timeline(tuple(Segment(w.start + (w.end - w.start) * i / len(ps),
+                                   w.start + (w.end - w.start) * (i + 1) / len(ps), p)
+                           for w in words for ps in [phones_of(w.label)] for i, p in enumerate(ps)))
+    ref = _shape_frames(phones, phones.duration)
+    agree = sum(a == b for a, b in zip(_shape_frames(mine, phones.duration), ref)) / len(ref)
+    agree_equal = sum(a == b for a, b in zip(_shape_frames(equal, phones.duration), ref)) / len(ref)
+    assert agree >= 0.80 and agree >= agree_equal
+    spoken = [s for s in phones if s.label not in ("sil", "sp", "spn")]
+    errors = []
+    for w in words:
+        ref_in = [s for s in spoken if w.start - 1e-6 <= s.start and s.end <= w.end + 1e-6]
+        mine_in = [s for s in mine if w.start - 1e-6 <= s.start and s.end <= w.end + 1e-6]
+        if ref_in and len(ref_in) == len(mine_in):
+            errors += [abs(a.end - b.end) for a, b in zip(ref_in[:-1], mine_in[:-1])]
+    assert len(errors) > 100 and sum(errors) / len(errors) <= 0.050
