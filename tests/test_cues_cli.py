@@ -97,3 +97,22 @@ def test_unknown_extension_and_missing_file_exit_2(tmp_path, capsys):
     assert main(["cues", str(SAMPLES / "hello.phn"), "-o", str(tmp_path)]) == 2
     assert main(["cues", str(SAMPLES / "hello.phn"), "-o", str(tmp_path / "c.dat"), "--fps", "0"]) == 2
     assert os.listdir(tmp_path) == []
+
+
+def test_bank_with_preston_blair_names_writes_the_same_cues(tmp_path):
+    import re
+    import shutil
+
+    from lipsync._data import default_bank_dir
+
+    bank = tmp_path / "pb"
+    shutil.copytree(default_bank_dir(), bank, ignore=shutil.ignore_patterns(".lipsync"))
+    pb = {"A": "MBP", "B": "etc", "C": "E", "D": "AI", "E": "O", "F": "U", "G": "FV", "H": "L", "X": "rest"}
+    text = (bank / "bank.yaml").read_text()
+    text = re.sub(r"^  ([A-HX]):$", lambda m: f"  {pb[m.group(1)]}:", text, flags=re.M)
+    (bank / "bank.yaml").write_text(text.replace("rest: X", "rest: rest"))
+    for ext in (".tsv", ".dat"):
+        a, b = tmp_path / f"a{ext}", tmp_path / f"b{ext}"
+        assert main(["cues", str(SAMPLES / "hello.phn"), "-o", str(a), "-q"]) == 0
+        assert main(["cues", str(SAMPLES / "hello.phn"), "-o", str(b), "--bank", str(bank), "-q"]) == 0
+        assert a.read_text() == b.read_text()
