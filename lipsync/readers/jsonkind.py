@@ -83,8 +83,13 @@ _KINDS += [
 
 def _parse(data: bytes) -> Tuple[bool, Any]:
     """(is JSON, document); JSON lines give the first line's document."""
+    import re
+
     from ._common import sniff_text
 
+    # Look at the first bytes before decoding anything: a large binary file is not JSON.
+    if not re.match(rb"(\xef\xbb\xbf)?\s*[\[{]", data[:4096].lstrip()[:8]):
+        return False, None
     text = sniff_text(data).strip()
     if not text or text[0] not in "[{":
         return False, None
