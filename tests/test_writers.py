@@ -193,3 +193,22 @@ def test_round_trip_moho_to_frames(tmp_path_factory, cues, fps):
         assert abs(s.start - a) <= half and abs(s.end - b) <= half
         assert s.start == pytest.approx((frame_of(a, fps) - 1) / fps)
     assert end_marker.start == pytest.approx((frame_of(cues[-1][1], fps) - 1) / fps, abs=1e-9)
+
+
+def test_moho_closure_keeps_its_frame_and_the_next_cue_moves_one(tmp_path):
+    out = tmp_path / "c.dat"
+    # 10 fps: the 30 ms closure A (0.2 s, frame 3) and the 370 ms D (0.23 s, also frame 3).
+    cues = [(0, 0.2, "X"), (0.2, 0.23, "A"), (0.23, 0.6, "D"), (0.6, 1.0, "X")]
+    write_cues(_track(cues), out, fps=10, closures=["A"])
+    assert out.read_text().split("\n")[1:-1] == ["1 X", "3 A", "4 D", "7 X", "11 X"]
+    # Without closures the longer D takes the frame and the lips never close.
+    write_cues(_track(cues), out, fps=10)
+    assert out.read_text().split("\n")[1:-1] == ["1 X", "3 D", "7 X", "11 X"]
+
+
+def test_moho_cue_with_no_frame_inside_it_is_dropped(tmp_path):
+    out = tmp_path / "c.dat"
+    # 10 fps: C (0.2-0.24) and B (0.24-0.25) both round to frame 3; C is longer and keeps it;
+    # B's next frame (4, at 0.3 s) starts after B ends, so B has no key; X (0.25 s) is frame 4.
+    write_cues(_track([(0, 0.2, "X"), (0.2, 0.24, "C"), (0.24, 0.25, "B"), (0.25, 0.6, "X")]), out, fps=10)
+    assert out.read_text().split("\n")[1:-1] == ["1 X", "3 C", "4 X", "7 X"]

@@ -69,7 +69,8 @@ def run(args: argparse.Namespace) -> int:
         # Preston Blair names where the map has them (Papagayo's and Moho's switch names).
         names = {v: aliases[0] for v, aliases in _map_aliases(args).items() if aliases}
     write_cues(cues, args.output, name, rest=rest, fps=fps, tier=args.tier_name,
-               sound_file=os.path.abspath(args.timeline), names=names, duration=timeline.duration)
+               sound_file=os.path.abspath(args.timeline), names=names,
+               closures=[to_map.get(c, c) for c in pmap.closures], duration=timeline.duration)
     if not args.quiet:
         print(f"lipsync: wrote {len(cues)} cues ({WRITERS.get(name).name}) to {args.output}", file=sys.stderr)
     return 0

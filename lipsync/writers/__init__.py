@@ -30,7 +30,7 @@ import math
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable, List, Mapping, Optional, Sequence, Tuple, Union
+from typing import Callable, FrozenSet, Iterable, List, Mapping, Optional, Sequence, Tuple, Union
 
 from ..errors import InputError
 from ..registry import Registry
@@ -65,6 +65,9 @@ class CueOptions:
         The recording the cues belong to (Rhubarb's ``metadata.soundFile``).
     names : mapping
         Viseme -> name written, for formats with their own names (Moho: Preston Blair).
+    closures : frozenset
+        Visemes that must be shown however short (the map's closures): Moho keys them first
+        when cues share a frame.
     """
 
     duration: float
@@ -73,6 +76,7 @@ class CueOptions:
     tier: str = DEFAULT_TIER
     sound_file: Optional[str] = None
     names: Mapping[str, str] = field(default_factory=dict)
+    closures: FrozenSet[str] = frozenset()
 
 
 @dataclass(frozen=True)
@@ -151,7 +155,7 @@ def format_for(path: PathLike) -> str:
 def write_cues(cues: Union[Timeline, Sequence[Cue]], path: PathLike, format: Optional[str] = None, *,
                rest: str = "X", fps: float = DEFAULT_FPS, tier: str = DEFAULT_TIER,
                sound_file: Optional[str] = None, names: Optional[Mapping[str, str]] = None,
-               duration: Optional[float] = None) -> str:
+               closures: Iterable[str] = (), duration: Optional[float] = None) -> str:
     """Write a viseme track as mouth cues; returns the format name used.
 
     Parameters
@@ -172,6 +176,8 @@ def write_cues(cues: Union[Timeline, Sequence[Cue]], path: PathLike, format: Opt
         The recording, named in Rhubarb's JSON and XML metadata.
     names : mapping, optional
         Viseme -> name written (Moho: Preston Blair names); unmapped visemes keep their name.
+    closures : iterable of str
+        Visemes shown however short (closed lips); Moho gives them a key first.
     duration : float, optional
         End of the track (default: the timeline's duration).
 
@@ -206,7 +212,7 @@ def write_cues(cues: Union[Timeline, Sequence[Cue]], path: PathLike, format: Opt
         raise InputError(f"frame rate must be a positive number, not {fps!r}")
     track, total = cue_track(cues, rest=rest, duration=duration)
     options = CueOptions(duration=total, rest=rest, fps=float(fps), tier=tier, sound_file=sound_file,
-                         names=dict(names or {}))
+                         names=dict(names or {}), closures=frozenset(closures))
     text = writer.render(track, options)
     data = text.encode("utf-8")
     atomic_write_bytes(Path(os.fspath(path)), lambda fh: fh.write(data))
