@@ -9,9 +9,7 @@ format stores; Moho to whole frames, at most half a frame from the written time)
 from __future__ import annotations
 
 import json
-import math
 import os
-import re
 import xml.etree.ElementTree as ET
 from pathlib import Path
 

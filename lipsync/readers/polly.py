@@ -9,7 +9,8 @@ Polly returns one JSON object per line (``--output-format json`` with
   the shipped shapes by ``configs/maps/polly-to-rhubarb.yaml``.
 * ``word``: used only when the file has no viseme marks. A word lasts until the next word
   starts, but no longer than :data:`WORD_STRETCH` times its typical length (a pause after
-  it is silence; the last word lasts its typical length), and becomes phones through :func:`lipsync.speech.phonetise.words_to_phones`.
+  it is silence; the last word lasts its typical length), and becomes phones through
+  :func:`lipsync.speech.phonetise.words_to_phones`.
   SSML tags reported as words (``<break time="300ms"/>``) are not spoken and are skipped.
 * ``sentence`` and ``ssml``: carry no timing a mouth needs; ignored.
 """

@@ -197,7 +197,8 @@ def read_elevenlabs(path: str, data: bytes, options: ReadOptions) -> Timeline:
 _CHARS = re.compile(r'"(character_start_times_seconds|characterStartTimesSeconds|charStartTimesMs)"\s*:')
 _GENTLE_OR_RHUBARB = re.compile(r'"(case|alignedWord|mouthCues)"\s*:')
 _WHISPER_KEYS = re.compile(r'"(segments|words|transcription|chunks)"\s*:\s*\[')
-_WORD_ITEM = re.compile(r'^\[\s*\{[^{}]*"(word|text)"\s*:[^{}]*"start"\s*:|^\[\s*\{[^{}]*"start"\s*:[^{}]*"(word|text)"\s*:')
+_WORD_ITEM = re.compile(r'^\[\s*\{[^{}]*"(word|text)"\s*:[^{}]*"start"\s*:'
+                        r'|^\[\s*\{[^{}]*"start"\s*:[^{}]*"(word|text)"\s*:')
 
 
 def sniff_elevenlabs(head: bytes) -> bool:
