@@ -46,6 +46,7 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
 def run(args: argparse.Namespace) -> int:
     """Write the cue file; returns the exit code."""
     from ..errors import InputError
+    from ..phonemes import DEFAULT_MAP, load_map
     from ..sequencer import FPS_RANGE, plan_segments
     from ..writers import format_for, write_cues
 
@@ -55,8 +56,9 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(f"--fps {args.fps:g} is outside {FPS_RANGE[0]:g}..{FPS_RANGE[1]:g}")
     if os.path.isdir(args.output):
         raise InputError("is a folder; give a file name for the cues", path=args.output)
+    base = load_map(args.map or DEFAULT_MAP)  # the map's own names, whatever the bank calls them
     if args.bank is not None:
-        timeline, pmap, to_map, rest = _bank_track(args)
+        timeline, pmap, to_map, rest = _bank_track(args, base)
     else:
         timeline, pmap = load_viseme_timeline(args)
         to_map, rest = {}, pmap.silence
@@ -67,7 +69,7 @@ def run(args: argparse.Namespace) -> int:
     names: Dict[str, str] = {}
     if WRITERS.get(name).name == "moho":
         # Preston Blair names where the map has them (Papagayo's and Moho's switch names).
-        names = {v: aliases[0] for v, aliases in _map_aliases(args).items() if aliases}
+        names = {v: aliases[0] for v, aliases in base.aliases.items() if aliases}
     write_cues(cues, args.output, name, rest=rest, fps=fps, tier=args.tier_name,
                sound_file=os.path.abspath(args.timeline), names=names,
                closures=[to_map.get(c, c) for c in pmap.closures], duration=timeline.duration)
@@ -76,19 +78,12 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _map_aliases(args: argparse.Namespace):
-    from ..phonemes import DEFAULT_MAP, load_map
-
-    return load_map(args.map or DEFAULT_MAP).aliases
-
-
-def _bank_track(args: argparse.Namespace):
+def _bank_track(args: argparse.Namespace, base):
     """The track in the bank's names (checked against it), bank name -> map name, the bank's rest."""
     from ..bank import Bank
-    from ..phonemes import DEFAULT_MAP, load_map, resolve_visemes
+    from ..phonemes import resolve_visemes
 
     bank = Bank.load(args.bank)
     timeline, pmap = load_viseme_timeline(args, rest=bank.rest, viseme_names=bank.names)
-    names, _ = resolve_visemes(load_map(args.map or DEFAULT_MAP), bank.names)
-    back = {b: m for m, b in names.items()}
-    return timeline, pmap, back, bank.rest
+    names, _ = resolve_visemes(base, bank.names)
+    return timeline, pmap, {b: m for m, b in names.items()}, bank.rest
