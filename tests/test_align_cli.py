@@ -272,3 +272,15 @@ def test_workers_are_forked_only_from_a_single_threaded_main():
     finally:
         idle.set()
         other.join()
+
+
+def test_cues_from_audio_equal_cues_from_its_alignment(tmp_path):
+    # audio goes through the same stage as any timeline: cues made straight from the wav are
+    # the cues made from the TextGrid `lipsync align` wrote for it
+    grid = tmp_path / "hello.TextGrid"
+    assert lipsync("align", HELLO_WAV, "--text", SAMPLES / "hello.lab", "-o", grid, "-q").returncode == 0
+    a, b = tmp_path / "from_audio.tsv", tmp_path / "from_grid.tsv"
+    r = lipsync("cues", HELLO_WAV, "--text", SAMPLES / "hello.lab", "-o", a, "--format", "rhubarb-tsv")
+    assert r.returncode == 0, r.stderr
+    assert lipsync("cues", grid, "-o", b, "--format", "rhubarb-tsv").returncode == 0
+    assert a.read_text() == b.read_text() and len(a.read_text().splitlines()) > 10
