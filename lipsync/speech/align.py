@@ -75,7 +75,7 @@ SILENCE_DBFS = -50.0
 #: and i, which sit 7.8 ms later with 25.6 ms windows), but against MFA, whose Kaldi frames
 #: follow the same convention, the median is 0 and a +10 ms shift raises the mean error from
 #: 17.7 to about 23 ms. A mouth 10 ms ahead of its sound is also far below what viewers
-#: notice (sound leading picture is detected from about 45 ms, ITU-R BT.1359), so the
+#: notice (ITU-R BT.1359: sound lagging picture is detected from about 125 ms), so the
 #: frame-centre correction is not applied.
 BOUNDARY_OFFSET_S = 0.0
 
