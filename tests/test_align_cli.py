@@ -183,6 +183,10 @@ def test_unreadable_audio_exit_2_naming_the_file(tmp_path):
         assert not out.exists() and not list(tmp_path.glob(".lipsync-*"))
     r = lipsync("render", bad, "-o", tmp_path / "x.mp4", "--method", "dissolve")
     assert r.returncode == 2 and str(bad) in r.stderr
+    silent_video = tmp_path / "silent.mp4"
+    ffmpeg("-f", "lavfi", "-i", "testsrc=size=32x32:rate=5", "-t", "0.4", silent_video)
+    r = lipsync("align", silent_video, "-o", out)
+    assert r.returncode == 2 and f"{silent_video}: cannot read as audio (no audio stream)" in r.stderr
     r = lipsync("align", HELLO_WAV, "-o", tmp_path / "no" / "such" / "out.TextGrid")
     assert r.returncode == 2 and "out.TextGrid" in r.stderr and "folder" in r.stderr
 

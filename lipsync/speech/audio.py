@@ -93,9 +93,9 @@ def load_audio(path: PathLike, *, sample_rate: int = SAMPLE_RATE) -> np.ndarray:
     except OSError as exc:  # ffmpeg itself not runnable: the environment, not the file
         raise OSError(f"cannot run ffmpeg to read {name}: {exc}") from exc
     if proc.returncode != 0:
-        said = proc.stderr.decode("utf-8", "replace").strip()
-        said = said[-_STDERR_TAIL:].splitlines()[-1] if said else f"ffmpeg exit status {proc.returncode}"
-        if "matches no streams" in said or "Stream map" in said:
+        full = proc.stderr.decode("utf-8", "replace").strip()
+        said = full[-_STDERR_TAIL:].splitlines()[-1] if full else f"ffmpeg exit status {proc.returncode}"
+        if "matches no streams" in full:  # a video without sound, an image, ...
             said = "no audio stream"
         raise AudioError(f"cannot read as audio ({said})", path=name)
     data = proc.stdout
