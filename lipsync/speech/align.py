@@ -2,23 +2,25 @@
 
 The stages, each a function over plain values::
 
-    load_audio -> _frame_energy -> _plan_chunks (cut at the quietest places)
-    -> per chunk: [recognise] -> forced word alignment -> phone alignment
+    load_audio -> _frame_energy -> [_plan_chunks: cut at the quietest places]
+    -> per chunk: [_recognise] or [_fitting_words] -> _force_align (words, then phones)
     -> Alignment (words and phones timelines over the whole audio)
 
 * With a transcript, the words are normalised (:func:`normalise_transcript`), words the
   dictionary lacks get a pronunciation from :func:`pronounce` (listed in one warning), and
   pocketsphinx aligns them (its align search, then a state-level second pass for phones).
 * Without one, the words are recognised first with pocketsphinx's US-English language
-  model, then aligned the same way.
+  model (in chunks of :data:`RECOGNITION_CHUNK_S`, in worker processes when there are
+  several), then their phones are aligned inside the recognised word boundaries.
 * pocketsphinx's alignment search grows faster than linearly with utterance length
-  (measured: 0.42 s for 27 s of speech, 9.3 s for 214 s), so audio longer than
-  :data:`MAX_CHUNK_S` is cut at its quietest places into chunks of bounded length; the
-  transcript is shared out among the chunks by matching it against what recognition heard
-  in each. Time and memory then grow linearly with the audio.
-* Silence-only audio gives empty timelines spanning the audio. A transcript that cannot be
-  aligned (it does not fit the audio) falls back to the recognised words, with a warning
-  giving a confidence figure.
+  (measured: 0.42 s for 27 s of speech, 9.3 s for 214 s), so a transcribed recording longer
+  than :data:`MAX_CHUNK_S` is cut at its quietest places into chunks, and each chunk takes
+  the next transcript words that fit it (:func:`_align_long`). Time and memory then grow
+  linearly with the audio.
+* A transcript that does not fit: a second search may skip any of its words
+  (:func:`_fitting_words`); if even that fails, the recognised words are used. Either way
+  a warning gives a confidence figure. Silence-only audio gives empty timelines spanning
+  the audio.
 
 Examples
 --------
