@@ -450,9 +450,9 @@ def _align_long(piece, chunks, transcript, energy, bar):
         pointer += consumed
         kept = [window[j] for j in kept_at]
         got = _force_align(piece(a, b), kept) if kept else []
-        if got is None:
+        if got is None:  # the words found do not align after all: what is heard there
             failed += len(kept)
-            got = []
+            got = _recognise(piece(a, b))[1]
         per_chunk.append(got)
         bar.update()
     skipped += len(transcript) - pointer
@@ -568,7 +568,6 @@ def align_samples(pcm: np.ndarray, text: Optional[str] = None, *, quiet: bool = 
                 chunks = _plan_chunks(energy, RECOGNITION_CHUNK_S)
                 bar.total = len(chunks)
                 bar.refresh()
-                # Worker processes pay a model load each (~0.5 s): worth it from a few chunks on.
                 workers = workers if len(chunks) >= MIN_CHUNKS_FOR_WORKERS else 1
                 per_chunk = [t for _, t in _run_jobs([("recognise", piece(a, b)) for a, b in chunks], workers, bar)]
                 failed, skipped = len(transcript), 0
@@ -594,8 +593,9 @@ def align_samples(pcm: np.ndarray, text: Optional[str] = None, *, quiet: bool = 
                          "aligned, and the words recognised there were used instead")
             if not (failed or skipped):
                 what = "fits the audio poorly; the alignment is a best effort"
-            warnings.warn(f"{path or 'audio'}: the transcript {what} (confidence {confidence:.2f}: "
-                          "the smaller of the share of its words found and the share of the speech they cover)", AlignmentWarning, stacklevel=2)
+            warnings.warn(f"{path or 'audio'}: the transcript {what} (confidence {confidence:.2f}: the "
+                          "smaller of the share of its words found and the share of the speech they cover)",
+                          AlignmentWarning, stacklevel=2)
     return _to_alignment(timings, duration, path, transcript if has_text else tuple(w for w, *_ in timings),
                          recognised=not has_text or failed > 0, confidence=confidence, missing=missing)
 
