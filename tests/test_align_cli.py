@@ -288,3 +288,29 @@ def test_cues_from_audio_equal_cues_from_its_alignment(tmp_path):
     assert r.returncode == 0, r.stderr
     assert lipsync("cues", grid, "-o", b, "--format", "rhubarb-tsv").returncode == 0
     assert a.read_text() == b.read_text() and len(a.read_text().splitlines()) > 10
+
+
+def test_long_transcribed_audio_is_aligned_chunk_by_chunk():
+    # 12 copies of hello.wav (35.6 s, over MAX_CHUNK_S): cut into chunks, each taking the
+    # next words of the transcript; every copy's words land at that copy's times
+    from lipsync.speech.align import MAX_CHUNK_S, align_samples
+    from lipsync.speech.audio import load_audio
+
+    pcm = load_audio(HELLO_WAV)
+    copies, period = 12, len(pcm) / 16000
+    assert copies * period > MAX_CHUNK_S
+    with pytest.warns(MissingWordsWarning):
+        long = align_samples(np.tile(pcm, copies), " ".join([HELLO_TEXT] * copies))
+    with pytest.warns(MissingWordsWarning):
+        one = align_samples(pcm, HELLO_TEXT)
+    assert not long.recognised and long.confidence > 0.9
+    words = long.words.labels()
+    assert len(words) >= 0.95 * copies * len(HELLO_WORDS)
+    # each word within 40 ms of the same word in the single copy, shifted by its copy's start
+    ref = [(s.label, s.start) for s in one.words]
+    errors = []
+    for seg in long.words:
+        k = int(seg.start // period)
+        cands = [t for w, t in ref if w == seg.label]
+        errors.append(min(abs(seg.start - k * period - t) for t in cands))
+    assert np.median(errors) < 0.02 and np.mean(np.array(errors) < 0.04) > 0.95
