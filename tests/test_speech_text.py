@@ -17,6 +17,7 @@ from lipsync.speech.lexicon import VOWELS, in_dictionary
     ("Don't say \u2018hi\u2019 \u2014 it\u2019s James' turn", ["don't", "say", "hi", "it's", "james", "turn"]),
     ("Caf\u00e9 na\u00efve", ["cafe", "naive"]),
     ("Dr. Who & 50%", ["doctor", "who", "and", "fifty", "percent"]),
+    ("call 12345678901234567", ["call"] + "one two three four five six seven eight nine zero one two three four five six seven".split()),
     ("", []),
     (" ... !!! ", []),
 ])
@@ -58,3 +59,12 @@ def test_pronounce_missing_words_has_phones_and_is_listed():
     # letter-to-sound rules: silent final e, magic e, digraphs
     assert [p.rstrip("012") for p in pronounce("blakeshore")][:4] == ["B", "L", "EY", "K"]
     assert pronounce("...") == ()
+
+
+def test_pathological_text_never_fails():
+    # a 400-digit number is beyond num2words (it raised OverflowError): read digit by digit
+    assert normalise_transcript("1" * 400) == ["one"] * 400
+    # a 5000-letter "word" skips the (quadratic) analogy search: rules only, doubled letters once
+    long_word = "x" * 5000
+    assert normalise_transcript(long_word) == [long_word]
+    assert pronounce(long_word) == ("K", "S") * 2500

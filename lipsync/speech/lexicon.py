@@ -174,10 +174,17 @@ _MIN_PIECE = 3
 _RULE_LETTER_COST = 0.6
 
 
+# Longer "words" (a run of letters pasted without spaces) are read by the rules alone: the
+# analogy search looks up every substring, so its cost grows with the square of the length.
+_MAX_ANALOGY_LETTERS = 40
+
+
 def _by_analogy(word: str) -> List[str]:
     d = _dictionary()
     w = re.sub(r"[^a-z']", "", word.lower())
     n = len(w)
+    if n > _MAX_ANALOGY_LETTERS:
+        return _letters_to_sound(w)
     best = [0.0] + [float("inf")] * n
     back: List[Tuple[int, bool]] = [(0, False)] * (n + 1)
     for i in range(1, n + 1):

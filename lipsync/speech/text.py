@@ -44,6 +44,8 @@ _TOKEN = re.compile(r"""
 # say them; 2000-2009 are said as cardinals ("two thousand five") and num2words' year form
 # would say the same, so the range needs no hole.
 _YEARS = range(1100, 2100)
+# Longer whole numbers are read digit by digit (credit card, phone and serial numbers).
+_MAX_SPOKEN_DIGITS = 15
 
 
 def number_words(text: str, ordinal: bool = False) -> List[str]:
@@ -70,6 +72,9 @@ def number_words(text: str, ordinal: bool = False) -> List[str]:
 
     grouped = "," in text
     plain = text.replace(",", "")
+    if len(plain.split(".")[0]) > _MAX_SPOKEN_DIGITS:
+        # Nobody says a 30-digit number as one (num2words stops at 10**300): digit by digit.
+        return [w for d in plain if d != "." for w in number_words(d)]
     if "." in plain:
         whole, frac = plain.split(".", 1)
         # "3.14" is said digit by digit after the point ("three point one four").
