@@ -68,3 +68,15 @@ def test_pathological_text_never_fails():
     long_word = "x" * 5000
     assert normalise_transcript(long_word) == [long_word]
     assert pronounce(long_word) == ("K", "S") * 2500
+
+
+from hypothesis import given, settings, strategies as st
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.text(max_size=60))
+def test_any_text_gives_plain_words_each_with_phones(text):
+    for word in normalise_transcript(text):
+        assert word and word == word.lower() and word.replace("'", "").isalpha() and word.isascii()
+        phones = pronounce(word)
+        assert phones and all(p.rstrip("012").isalpha() for p in phones)
