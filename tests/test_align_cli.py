@@ -256,6 +256,13 @@ def test_animator_from_audio(rhubarb_bank):
     assert len(anim) == int(np.ceil(47473 / 16000 * 30))
     assert anim.alignment.words.labels() == HELLO_WORDS
     assert anim.frame(0).shape[2] == 3
+    # samples instead of a file (floats in -1..1, as sound libraries give them): same result
+    from lipsync.speech.audio import load_audio
+
+    samples = load_audio(HELLO_WAV).astype(np.float32) / 32768
+    same = Animator.from_audio(rhubarb_bank, samples, HELLO_TEXT, fps=30, method="dissolve")
+    assert same.alignment.phones.labels() == anim.alignment.phones.labels()
+    assert same.specs == anim.specs
 
 
 def test_workers_are_forked_only_from_a_single_threaded_main():
