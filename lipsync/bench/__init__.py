@@ -79,8 +79,10 @@ def peak_mb(fn: Callable[[], object]) -> float:
 
 def _table(rows: List[dict]) -> str:
     lines = []
-    for fig in dict.fromkeys(r["figure"] for r in rows):  # every figure, in the order run
+    # Every figure present, in the order they ran.
+    for fig in dict.fromkeys(r["figure"] for r in rows):
         sel = [r for r in rows if r["figure"] == fig]
+        # the union of the rows' columns: a figure's rows need not all measure the same things
         keys = list(dict.fromkeys(k for r in sel for k in r if k != "figure"))
         widths = [max(len(k), *(len(str(r.get(k, ""))) for r in sel)) for k in keys]
         lines.append(f"\n## {fig}")
