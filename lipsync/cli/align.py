@@ -43,6 +43,8 @@ def run(args: argparse.Namespace) -> int:
     if not args.quiet:
         dt = time.perf_counter() - t0
         how = "recognised and aligned" if alignment.recognised else "aligned"
+        if alignment.confidence is not None:
+            how += f" (transcript confidence {alignment.confidence:.2f})"
         print(f"wrote {args.output}: {len(alignment.words)} words, {len(alignment.phones)} phones {how} in "
               f"{alignment.duration:.2f} s of audio ({alignment.duration / max(dt, 1e-9):.1f}x real time)",
               file=sys.stderr)
