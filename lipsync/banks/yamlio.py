@@ -8,6 +8,7 @@ file are kept on rewrite; comments elsewhere are not (PyYAML does not keep them)
 
 from __future__ import annotations
 
+import functools
 import json
 import math
 import os
@@ -30,9 +31,12 @@ def _scalar(value) -> str:
     if isinstance(value, float):
         if not math.isfinite(value):
             raise ValueError(f"not a finite number: {value!r}")
-        r = round(value, 3)
-        return str(int(r)) if r == int(r) and abs(r) < 1e15 else repr(r)
-    text = str(value)
+        return repr(value)  # the shortest text that reads back as the same float: no drift on rewrite
+    return _string(str(value))
+
+
+@functools.lru_cache(maxsize=4096)  # names repeat in every viseme; parsing each is the cost
+def _string(text: str) -> str:
     # Plain when it reads back as the same string (not a bool, null or number in YAML 1.1).
     if _PLAIN.match(text) and yaml.safe_load(text) == text:
         return text
