@@ -95,8 +95,9 @@ function shapeElement(f, attrs, parent) {
   return el("polyline", Object.assign({points: pts.map((p) => p.join(",")).join(" ")}, attrs), parent);
 }
 function unitsPerPixel() {
+  // The image is fitted whole (preserveAspectRatio "meet"): the tighter direction rules.
   const svg = $("canvas");
-  return S.view.w / Math.max(1, svg.clientWidth);
+  return Math.max(S.view.w / Math.max(1, svg.clientWidth), S.view.h / Math.max(1, svg.clientHeight));
 }
 function drawCanvas() {
   const g = $("canvas-lines");
@@ -117,6 +118,9 @@ function drawCanvas() {
         "data-feature": name, "data-k": k}, g);
       h.addEventListener("pointerdown", (e) => startDrag(e, name, k));
     });
+    el("title", {}, shape).textContent = name;
+    // Names only for the selected line and its partner: all 40 at once hide the mouth.
+    if (name !== S.selected && name !== partnerOf(S.selected || "")) continue;
     const mid = pts[Math.floor((pts.length - 1) / 2)], nxt = pts[Math.floor((pts.length - 1) / 2) + 1];
     const label = el("text", {class: "label", x: (mid[0] + nxt[0]) / 2 + 4 * u, y: (mid[1] + nxt[1]) / 2 - 4 * u,
       fill: colour, "font-size": 11 * u}, g);
@@ -217,11 +221,10 @@ function movePoint(v, name, k, x, y) {
 function startDrag(e, name, k) {
   e.stopPropagation();
   e.preventDefault();
+  // Listen on the window: redraws replace the handle element under the pointer.
+  const start = svgPoint(e);
   select(name);
   pushUndo();
-  const target = e.target;
-  target.setPointerCapture(e.pointerId);
-  const start = svgPoint(e);
   const p0 = pointsOf(lines(S.current)[name])[k].slice();
   const move = (ev) => {
     const p = svgPoint(ev);
@@ -229,14 +232,14 @@ function startDrag(e, name, k) {
     drawCanvas();
   };
   const up = () => {
-    target.removeEventListener("pointermove", move);
-    target.removeEventListener("pointerup", up);
-    target.removeEventListener("pointercancel", up);
+    window.removeEventListener("pointermove", move);
+    window.removeEventListener("pointerup", up);
+    window.removeEventListener("pointercancel", up);
     changed();
   };
-  target.addEventListener("pointermove", move);
-  target.addEventListener("pointerup", up);
-  target.addEventListener("pointercancel", up);
+  window.addEventListener("pointermove", move);
+  window.addEventListener("pointerup", up);
+  window.addEventListener("pointercancel", up);
 }
 function setupPanZoom() {
   const svg = $("canvas");
