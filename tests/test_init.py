@@ -144,3 +144,19 @@ def test_bad_input_exit_2(tmp_path, capsys):
     assert "reaches outside" in capsys.readouterr().err
     assert main(["init", str(tmp_path), "--template", "nope"]) == 2
     assert "toon" in capsys.readouterr().err
+
+
+def test_mouth_sprites_lines_go_where_the_mouth_moves(tmp_path, toon):
+    # Sprites cut from the toon around its mouth: the true lines are the toon's, shifted by
+    # the cut's corner. The template is fitted to where the sprites differ, not to the middle.
+    x0, y0 = 176, 300
+    for v in toon.names:
+        img = cv2.imread(str(TOON / f"{v}.png"))
+        cv2.imwrite(str(tmp_path / f"{v}.png"), img[y0:y0 + 120, x0:x0 + 160])
+    assert init_bank(tmp_path).layout == "mouth"
+    bank = Bank.load(tmp_path)
+    idx = [i for i, n in enumerate(toon.line_names) if _is_mouth(n)]
+    mine = [bank.line_names.index(toon.line_names[i]) for i in idx]
+    for v in toon.names:
+        err = np.abs(toon.lines[v][idx] - [x0, y0] - bank.lines[v][mine])
+        assert err.mean() < 3.0 and err.max() < 7.0, (v, err.mean(), err.max())

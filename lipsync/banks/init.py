@@ -12,9 +12,11 @@ Two layouts:
   scaled to the image (uniformly, centred), or mapped onto ``face_box`` when given; the
   template's frame lines (``frame_*``, which pin the picture's border) follow the border.
 * ``mouth`` — a mouth-only sprite, as Rhubarb users draw them: there are no eyes or chin to
-  anchor, so only the template's mouth lines are kept, scaled to fill
-  :data:`MOUTH_FILL` of the sprite around its centre, plus the frame lines that keep the
-  sprite's border still.
+  anchor, so only the template's mouth lines are kept, plus the frame lines that keep the
+  sprite's border still. The mouth lines go where the sprites differ from one another (the
+  box of pixels that change between visemes: that is where the mouth moves), the template's
+  mouth box fitted into it; when nothing differs enough they fill :data:`MOUTH_FILL` of the
+  sprite around its centre.
 
 ``auto`` (the default) picks ``mouth`` for images of at most :data:`SPRITE_MAX_SIDE`
 pixels a side without a face box, ``face`` otherwise.
@@ -53,6 +55,11 @@ SPRITE_MAX_SIDE = 256
 #: Share of a sprite's width or height the template's widest mouth fills (room for lips
 #: that open further than the template's).
 MOUTH_FILL = 0.8
+#: A pixel "moves" when its value spans more than this across the visemes (0-255): above
+#: JPEG noise and anti-aliasing wobble, below any real change of lip or teeth.
+MOVING_LEVEL = 24
+#: Fewer moving pixels than this share of the sprite: no usable mouth region.
+MOVING_MIN_SHARE = 0.002
 #: Line names that belong to the mouth (kept in the mouth layout), by prefix.
 MOUTH_PREFIXES = ("upper_", "lower_", "corner_", "teeth_", "lip", "mouth", "tongue")
 #: Lines that pin the picture's border: scaled with the image, not the face.
@@ -86,6 +93,16 @@ def _affine(points: np.ndarray, scale: Tuple[float, float], origin_from, origin_
 def _bbox(features: Sequence[Dict[str, Feature]], keep) -> np.ndarray:
     pts = np.concatenate([f.points for fs in features for n, f in fs.items() if keep(n)])
     return np.array([pts.min(axis=0), pts.max(axis=0)])
+
+
+def _moving_box(images) -> Optional[np.ndarray]:
+    """``[[x0, y0], [x1, y1]]`` (pixel centres) of the pixels that change between images."""
+    stack = np.stack(list(images))
+    span = (stack.max(axis=0).astype(np.int16) - stack.min(axis=0)).max(axis=2)
+    ys, xs = np.nonzero(span > MOVING_LEVEL)
+    if xs.size < MOVING_MIN_SHARE * span.size:
+        return None
+    return np.array([[xs.min(), ys.min()], [xs.max(), ys.max()]], dtype=np.float64)
 
 
 def _is_mouth(name: str) -> bool:
@@ -205,8 +222,14 @@ def init_bank(folder, *, template: str = "toon", names: Optional[Dict[str, str]]
         box = _bbox(tfeatures, _is_mouth)
         centre_from = box.mean(axis=0)
         extent = np.maximum(box[1] - box[0], 1e-6)
-        s = MOUTH_FILL * min(w / extent[0], h / extent[1])
-        scale, origin_from, origin_to = (s, s), centre_from, ((w - 1) / 2, (h - 1) / 2)
+        moving = _moving_box(images.values()) if len(images) > 1 else None
+        if moving is not None:
+            size = np.maximum(moving[1] - moving[0], 1.0)
+            s = min(size[0] / extent[0], size[1] / extent[1])
+            scale, origin_from, origin_to = (s, s), centre_from, tuple(moving.mean(axis=0))
+        else:
+            s = MOUTH_FILL * min(w / extent[0], h / extent[1])
+            scale, origin_from, origin_to = (s, s), centre_from, ((w - 1) / 2, (h - 1) / 2)
     else:
         def keep(n):
             return True

@@ -57,8 +57,9 @@ MAX_BODY = 2 << 20
 #: may still name it).
 KEEP_DRAFTS = 2
 #: How long a preview waits for the flows of its pair before rendering with Beier-Neely:
-#: about two pair computations of a 512x512, 41-line bank on one core.
-PREVIEW_WAIT_S = 0.6
+#: a pair of a symmetric 512x512, 41-line bank takes ~0.3 s idle, ~1 s on a busy machine (make
+#: bench, figure "editor"), and a Beier-Neely frame costs more than that.
+PREVIEW_WAIT_S = 1.0
 
 
 @dataclass(frozen=True)
