@@ -130,6 +130,26 @@ def test_undo_redo_add_rename_delete(tmp_path, template_bank, driver):
         driver.find_element("id", "redo").click()
         names = driver.execute_script("return Object.keys(window.lipsyncEditor.doc.visemes.O.lines)")
         assert names[-2:] == ["mouth_l", "mouth_r"]
+        # a Bézier pair, saved: the bank loads it as curves of 8 segments
+        box.clear()
+        box.send_keys("arc_r")
+        driver.find_element("id", "new-kind").send_keys("Bézier")
+        driver.find_element("id", "add").click()
+        arc = driver.execute_script("return window.lipsyncEditor.doc.visemes.A.lines.arc_l")
+        assert len(arc["bezier"]) == 4
+        # play runs the preview through several alphas, then stops
+        count = driver.execute_script("return window.lipsyncEditor.previewCount")
+        driver.find_element("id", "play").click()
+        wait(driver, f"window.lipsyncEditor.previewCount >= {count + 3}", what="playing")
+        driver.find_element("id", "play").click()
+        assert driver.find_element("id", "play").text == "Play"
+        driver.find_element("id", "save").click()
+        wait(driver, "document.getElementById('message').textContent.startsWith('saved')", what="the save")
+        from lipsync.bank import Bank
+        saved = Bank.load(bank)
+        assert [n for n in saved.line_names if n.startswith("arc_l")] == [f"arc_l#{i}" for i in range(8)]
+        assert saved.features["O"]["arc_r"].kind == "bezier"
+        before = yaml.safe_load((bank / "bank.yaml").read_text())
         # copy X's lines onto the shown viseme
         click(driver, ".thumb[data-viseme='E']")
         driver.find_element("id", "copy-from").send_keys("X")

@@ -282,16 +282,25 @@ function addLine() {
   const [h, w] = S.shape;
   const axis = S.axis !== null ? S.axis : (w - 1) / 2;
   const partner = S.doc.symmetry ? partnerOf(name) : null;
+  const kind = $("new-kind").value;
+  // A new feature runs from a to b across the middle of the picture; curves bow upwards.
+  const make = (a, b, y) => {
+    const lift = round1(h / 32);
+    if (kind === "bezier")
+      return {bezier: [[a, y], [round1(a + (b - a) / 3), y - lift], [round1(a + 2 * (b - a) / 3), y - lift], [b, y]]};
+    if (kind === "polyline") return {polyline: [[a, y], [round1((a + b) / 2), y - lift], [b, y]]};
+    return [[a, y], [b, y]];
+  };
   pushUndo();
   for (const v of S.names) {
     const y = round1(h / 2);
     if (partner) {
       const side = name.endsWith("_l") ? -1 : 1;
       const a = round1(axis + side * w / 8), b = round1(axis + side * w / 16);
-      lines(v)[name] = [[a, y], [b, y]];
-      if (lines(v)[partner] === undefined) lines(v)[partner] = [[round1(2 * axis - a), y], [round1(2 * axis - b), y]];
+      lines(v)[name] = make(a, b, y);
+      if (lines(v)[partner] === undefined) lines(v)[partner] = make(round1(2 * axis - a), round1(2 * axis - b), y);
     } else {
-      lines(v)[name] = [[round1(axis - w / 16), y], [round1(axis + w / 16), y]];
+      lines(v)[name] = make(round1(axis - w / 16), round1(axis + w / 16), y);
     }
   }
   S.selected = name;
