@@ -279,3 +279,14 @@ def test_cli_bad_bank_exit_2(tmp_path, capsys):
 
     assert main(["edit", str(tmp_path)]) == 2
     assert "bank.yaml" in capsys.readouterr().err
+
+
+def test_cli_taken_port_exit_2(bank_dir, capsys):
+    from lipsync.cli import main
+
+    taken = Session.open()
+    try:
+        assert main(["edit", str(bank_dir), "--port", str(taken.port)]) == 2
+        assert f"cannot listen on 127.0.0.1:{taken.port}" in capsys.readouterr().err
+    finally:
+        taken.close()

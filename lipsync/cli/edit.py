@@ -24,19 +24,23 @@ def run(args: argparse.Namespace) -> int:
 
     if not 0 <= args.port <= 65535:
         raise InputError(f"--port must be 0..65535, got {args.port}")
-    editor = Editor(args.bank, store=FlowStore(args.store) if args.store else None)
-    session = Session.open("127.0.0.1", args.port)
+    session = Session.open("127.0.0.1", args.port)  # a taken port fails before any work
+    editor = None
     try:
+        editor = Editor(args.bank, store=FlowStore(args.store) if args.store else None)
         app = make_app(editor, session)
         if args.open:
+            import threading
             import webbrowser
 
-            threading_open = __import__("threading").Timer(0.5, webbrowser.open, (session.url("/"),))
-            threading_open.daemon = True
-            threading_open.start()
+            # After the server has started listening (run() below blocks).
+            opener = threading.Timer(0.5, webbrowser.open, (session.url("/"),))
+            opener.daemon = True
+            opener.start()
         print(f"editing {editor.yaml_path} (Ctrl-C to stop)", flush=True)
         serve(app, session, announce="lipsync edit: open")
     finally:
-        editor.close()
+        if editor is not None:
+            editor.close()
         session.close()
     return 0

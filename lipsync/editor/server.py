@@ -50,7 +50,8 @@ from ..web import Guard, PathRefused, Session, resolve_inside
 
 STATIC = Path(__file__).resolve().parent / "static"
 #: Files the page may load from the bank folder.
-IMAGE_TYPES = {".png": "image/png", ".jpg": "image/jpeg", ".jpeg": "image/jpeg"}
+IMAGE_TYPES = {".png": "image/png", ".jpg": "image/jpeg", ".jpeg": "image/jpeg", ".webp": "image/webp",
+               ".bmp": "image/bmp"}
 #: A bank.yaml is at most 1 MiB (bank.MAX_YAML_BYTES); its JSON form is about as large.
 MAX_BODY = 2 << 20
 #: Drafts kept renderable at once: the current one and the one before it (a preview request

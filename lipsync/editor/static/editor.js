@@ -122,8 +122,10 @@ function drawCanvas() {
     // Names only for the selected line and its partner: all 40 at once hide the mouth.
     if (name !== S.selected && name !== partnerOf(S.selected || "")) continue;
     const mid = pts[Math.floor((pts.length - 1) / 2)], nxt = pts[Math.floor((pts.length - 1) / 2) + 1];
-    const label = el("text", {class: "label", x: (mid[0] + nxt[0]) / 2 + 4 * u, y: (mid[1] + nxt[1]) / 2 - 4 * u,
-      fill: colour, "font-size": 11 * u}, g);
+    // Left partners are labelled to the left, so the two names of a pair do not overlap.
+    const left = name.endsWith("_l");
+    const label = el("text", {class: "label", x: (mid[0] + nxt[0]) / 2 + (left ? -6 : 6) * u,
+      y: (mid[1] + nxt[1]) / 2 - 6 * u, fill: colour, "font-size": 11 * u, "text-anchor": left ? "end" : "start"}, g);
     label.textContent = name;
   }
 }
