@@ -290,3 +290,17 @@ def test_cli_taken_port_exit_2(bank_dir, capsys):
         assert f"cannot listen on 127.0.0.1:{taken.port}" in capsys.readouterr().err
     finally:
         taken.close()
+
+
+def test_page_works_offline():
+    # Everything the page loads comes from this server: no CDN, no other host, no build output.
+    from lipsync.editor.server import STATIC
+
+    files = sorted(STATIC.iterdir())
+    assert {p.name for p in files} == {"index.html", "editor.js", "editor.css"}
+    for p in files:
+        text = p.read_text()
+        urls = re.findall(r"(?:https?:)?//[A-Za-z0-9.-]+\.[A-Za-z]{2,}[^\s\"')]*", text)
+        assert urls == ["http://www.w3.org/2000/svg"] * len(urls), (p.name, urls)  # the SVG namespace only
+    html = (STATIC / "index.html").read_text()
+    assert re.findall(r'(?:src|href)="([^"]+)"', html) == ["/static/editor.css", "/static/editor.js"]

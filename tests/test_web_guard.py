@@ -150,3 +150,8 @@ def test_resolve_inside(tmp_path):
         with pytest.raises(PathRefused):
             resolve_inside(root, bad)
     assert resolve_inside(root, "new.yaml", must_exist=False) == (root / "new.yaml").resolve()
+
+
+def test_bad_content_length(client, session):
+    r = client.post(f"/api/echo?token={session.token}", content=b"x", headers={"content-length": "abc"})
+    assert r.status_code == 400
