@@ -39,6 +39,11 @@ def click(driver, css):
     raise AssertionError(f"{css} kept going stale")
 
 
+def view_box(driver):
+    return [float(x) for x in driver.execute_script(
+        "return document.getElementById('canvas').getAttribute('viewBox')").split()]
+
+
 def preview_pixels(driver):
     """The preview <img> as shown, decoded from an element screenshot."""
     import cv2
@@ -109,7 +114,27 @@ def test_drag_slider_save(tmp_path, template_bank, driver):
 def test_undo_redo_add_rename_delete(tmp_path, template_bank, driver):
     bank = shutil.copytree(template_bank, tmp_path / "bank")
     before = yaml.safe_load((bank / "bank.yaml").read_text())
-    with editor_page(bank, driver, store=tmp_path / "store"):
+    from selenium.webdriver.common.action_chains import ActionChains
+
+    with editor_page(bank, driver, store=tmp_path / "store") as (editor, _):
+        # zoom and pan change the view box only
+        canvas = driver.find_element("id", "canvas")
+        vb = view_box(driver)
+        assert vb == [0, 0, 192, 160]
+        driver.find_element("id", "zoom-in").click()
+        zoomed = view_box(driver)
+        assert zoomed[2:] == pytest.approx([192 / 1.25, 160 / 1.25])
+        assert zoomed[0] + zoomed[2] / 2 == pytest.approx(96) and zoomed[1] + zoomed[3] / 2 == pytest.approx(80)
+        ActionChains(driver).move_to_element_with_offset(canvas, -canvas.size["width"] // 2 + 3, 0) \
+            .click_and_hold().move_by_offset(40, 0).release().perform()
+        panned = view_box(driver)
+        assert panned[0] < zoomed[0] and panned[1:] == pytest.approx(zoomed[1:])
+        driver.find_element("id", "zoom-fit").click()
+        assert view_box(driver) == [0, 0, 192, 160]
+        assert editor.worker.wait_idle(60)
+        wait(driver, "document.getElementById('preview-status').textContent.includes('flows 6/6') || "
+                     "document.getElementById('preview-status').textContent.includes('flows ready')",
+             what="flow progress shown")
         box = driver.find_element("id", "line-name")
         box.clear()
         box.send_keys("mouth_l")
