@@ -135,6 +135,21 @@ def test_undo_redo_add_rename_delete(tmp_path, template_bank, driver):
         wait(driver, "document.getElementById('preview-status').textContent.includes('flows 6/6') || "
                      "document.getElementById('preview-status').textContent.includes('flows ready')",
              what="flow progress shown")
+        # an unpaired line across the axis (the brow) mirrors its other end; nose (on the axis) does not
+        brow0 = driver.execute_script("const S = window.lipsyncEditor; return S.doc.visemes[S.current].lines.brow")
+        nose0 = driver.execute_script("const S = window.lipsyncEditor; return S.doc.visemes[S.current].lines.nose")
+        scale = driver.execute_script("return document.getElementById('canvas').getScreenCTM().a")
+        for feature, dx, dy in (("brow", -10, 6), ("nose", 0, -8)):
+            handle = driver.find_element("css selector", f"#canvas-lines circle[data-feature='{feature}'][data-k='0']")
+            ActionChains(driver).click_and_hold(handle).move_by_offset(dx, dy).release().perform()
+        brow = driver.execute_script("const S = window.lipsyncEditor; return S.doc.visemes[S.current].lines.brow")
+        nose = driver.execute_script("const S = window.lipsyncEditor; return S.doc.visemes[S.current].lines.nose")
+        assert brow[0] == pytest.approx([brow0[0][0] - 10 / scale, brow0[0][1] + 6 / scale], abs=0.11)
+        assert brow[1] == pytest.approx([2 * 95.5 - brow[0][0], brow[0][1]], abs=1e-6)
+        assert nose[1] == nose0[1] and nose[0][1] == pytest.approx(nose0[0][1] - 8 / scale, abs=0.11)
+        driver.find_element("id", "undo").click()
+        driver.find_element("id", "undo").click()
+        assert driver.execute_script("return window.lipsyncEditor.doc.visemes") == before["visemes"]
         box = driver.find_element("id", "line-name")
         box.clear()
         box.send_keys("mouth_l")

@@ -212,8 +212,19 @@ function svgPoint(e) {
   p.x = e.clientX; p.y = e.clientY;
   return p.matrixTransform(svg.getScreenCTM().inverse());
 }
-function movePoint(v, name, k, x, y) {
-  pointsOf(lines(v)[name])[k] = [x, y];
+function selfMirror(v, name, k) {
+  // An unpaired feature across the axis (a brow line, a chin curve) is its own mirror image
+  // run backwards: point k mirrors point N-1-k when they sit mirrored now (within 1 px).
+  if (!S.doc.symmetry || S.axis === null || partnerOf(name)) return -1;
+  const pts = pointsOf(lines(v)[name]), j = pts.length - 1 - k;
+  if (j === k) return -1;
+  const near = Math.abs(2 * S.axis - pts[k][0] - pts[j][0]) < 1 && Math.abs(pts[k][1] - pts[j][1]) < 1;
+  return near ? j : -1;
+}
+function movePoint(v, name, k, x, y, mirror = -1) {
+  const pts = pointsOf(lines(v)[name]);
+  pts[k] = [x, y];
+  if (mirror >= 0) pts[mirror] = [round1(2 * S.axis - x), y];
   const partner = partnerOf(name);
   if (S.doc.symmetry && S.axis !== null && partner && lines(v)[partner]) {
     const pp = pointsOf(lines(v)[partner]);
@@ -228,9 +239,10 @@ function startDrag(e, name, k) {
   select(name);
   pushUndo();
   const p0 = pointsOf(lines(S.current)[name])[k].slice();
+  const mirror = selfMirror(S.current, name, k);
   const move = (ev) => {
     const p = svgPoint(ev);
-    movePoint(S.current, name, k, round1(p0[0] + p.x - start.x), round1(p0[1] + p.y - start.y));
+    movePoint(S.current, name, k, round1(p0[0] + p.x - start.x), round1(p0[1] + p.y - start.y), mirror);
     drawCanvas();
   };
   const up = () => {
