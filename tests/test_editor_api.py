@@ -304,3 +304,45 @@ def test_page_works_offline():
         assert urls == ["http://www.w3.org/2000/svg"] * len(urls), (p.name, urls)  # the SVG namespace only
     html = (STATIC / "index.html").read_text()
     assert re.findall(r'(?:src|href)="([^"]+)"', html) == ["/static/editor.css", "/static/editor.js"]
+
+
+def test_save_refuses_to_clobber_a_file_changed_on_disk(client, bank_dir):
+    changed = (bank_dir / "bank.yaml").read_text().replace("name: synthetic", "name: changed-by-hand")
+    (bank_dir / "bank.yaml").write_text(changed)
+    r = client.post("/api/save", json={"doc": moved_doc(client)})
+    assert r.status_code == 409 and "changed by someone else" in r.json()["error"]["message"]
+    assert (bank_dir / "bank.yaml").read_text() == changed
+
+
+def test_abandoned_draft_flows_are_removed_on_close(bank_dir, tmp_path):
+    store = FlowStore(tmp_path / "store")
+    other = store.pair_path("0" * 64)  # an entry the editor did not write (another bank's, say)
+    other.parent.mkdir(parents=True)
+    other.write_bytes(b"not ours")
+    ed = Editor(bank_dir, store=store)
+    assert ed.worker.wait_idle(60)
+    base = ed.doc
+    import copy
+
+    for dx in (1.0, 2.0):  # two drafts that are never saved
+        doc = copy.deepcopy(base)
+        doc["visemes"]["O"]["lines"]["upper_l"][1][0] -= dx
+        doc["visemes"]["O"]["lines"]["upper_r"][1][0] += dx
+        ed.propose(doc)
+        assert ed.worker.wait_idle(60)
+    saved = copy.deepcopy(base)
+    saved["visemes"]["E"]["lines"]["upper_l"][1][0] -= 1.5
+    saved["visemes"]["E"]["lines"]["upper_r"][1][0] += 1.5
+    ed.save(saved)
+    assert ed.worker.wait_idle(60)
+    ed.close()
+    bank = Bank.load(bank_dir)
+    from lipsync.editor.server import normalise_axis
+    from lipsync.preprocess import all_pairs
+
+    wanted = {store.pair_path(store.pair_key(bank, a, b, normalise_axis(bank))) for a, b in all_pairs(bank.names)}
+    flows = set(store.pair_path("x").parent.glob("*.npz"))
+    # the saved bank's six pairs stay, and the entry the editor did not write; the drafts'
+    # flows and those of the version the save replaced are gone
+    assert flows == wanted | {other}
+    assert other.read_bytes() == b"not ours"

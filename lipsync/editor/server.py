@@ -23,8 +23,9 @@ API (every ``/api/`` call needs the session token, see :mod:`lipsync.web`):
     made the draft; invalid → 422 and nothing written. No other file can be written.
 
 Flows go to the bank's own store (``BANK/.lipsync``, or ``--store``), the one ``lipsync
-render`` reads, so a saved bank's flows are already there; entries of abandoned drafts are
-left for ``lipsync preprocess --prune``.
+render`` reads, so a saved bank's flows are already there; :meth:`Editor.close` removes the
+entries the editor wrote that the bank as saved does not use (abandoned drafts). A save is
+refused with 409 when bank.yaml changed on disk since the editor read or wrote it.
 """
 
 from __future__ import annotations
@@ -128,6 +129,7 @@ class FlowWorker:
         self.total = 0
         self.done = 0
         self.computing: Optional[Tuple[str, str]] = None
+        self.written: set = set()  # store keys this worker wrote (drafts' flows)
         self._stop = False
         self._thread = threading.Thread(target=self._run, name="lipsync-edit-flows", daemon=True)
         self._thread.start()
@@ -177,6 +179,10 @@ class FlowWorker:
             self._stop = True
             self._cond.notify_all()
 
+    def join(self, timeout: float) -> None:
+        """Wait for the pair being computed (if any) to finish after :meth:`stop`."""
+        self._thread.join(timeout)
+
     def wait_idle(self, timeout: float) -> bool:
         """Block until nothing is queued or computing (tests, benchmarks)."""
         deadline = time.monotonic() + timeout
@@ -206,6 +212,8 @@ class FlowWorker:
                 fwd, bwd = pair_flows(bank.shape, nb.lines[a], nb.lines[b], bank.warp,
                                       line_names=bank.line_names, axis=nb.axis)
                 draft.store.put_pair(key, fwd, bwd, axis=nb.axis, names=(a, b))
+                with self._cond:
+                    self.written.add(key)
             except OSError:
                 pass  # an unwritable store: the preview stays on beier-neely
             with self._cond:
@@ -231,6 +239,7 @@ class Editor:
         self.folder = bank.path.resolve()
         self.yaml_path = self.folder / "bank.yaml"
         text = self.yaml_path.read_text(encoding="utf-8")
+        self._on_disk = text  # what we last read or wrote: a save must not clobber other edits
         self.header = header_comments(text)
         self.doc = yaml.safe_load(text)
         self.store = store or FlowStore.for_bank(bank)
@@ -241,7 +250,8 @@ class Editor:
         self._version = 0
         self._drafts: Dict[int, _Draft] = {}
         self.worker = FlowWorker()
-        self._set_draft(self.validate(self.doc)[1])
+        self._first = self.validate(self.doc)[1]
+        self._set_draft(self._first)
 
     # ------------------------------------------------------------------ drafts
     def _set_draft(self, bank: Bank, first: Optional[Tuple[str, str]] = None) -> _Draft:
@@ -282,12 +292,44 @@ class Editor:
 
     def save(self, doc) -> _Draft:
         text, bank = self.validate(doc)
-        write_bank_text(self.yaml_path, text)
-        self.doc = doc
+        with self._lock:
+            try:
+                now = self.yaml_path.read_text(encoding="utf-8")
+            except OSError:
+                now = None
+            if now != self._on_disk:
+                raise ConflictError("bank.yaml was changed by someone else since the editor read it; "
+                                    "nothing was written (restart lipsync edit to load that version)",
+                                    path=self.yaml_path)
+            write_bank_text(self.yaml_path, text)
+            self._on_disk = text
+            self.doc = doc
+            self._saved = bank
         return self._set_draft(bank)
 
     def close(self) -> None:
+        """Stop the worker and remove the flows of abandoned drafts (those it wrote that the
+        last saved bank does not use); entries that were there before are left alone."""
         self.worker.stop()
+        self.worker.join(30)
+        saved = getattr(self, "_saved", None) or self._first
+        keep = {self.store.pair_key(saved, a, b, normalise_axis(saved)) for a, b in all_pairs(saved.names)}
+        for key in self.worker.written - keep:
+            try:
+                self.store.pair_path(key).unlink()
+            except OSError:
+                pass
+
+
+class ConflictError(InputError):
+    """bank.yaml changed on disk while the editor had it open."""
+
+
+def normalise_axis(bank: Bank) -> Optional[float]:
+    """The mirror axis the flows of ``bank`` are keyed with (None without symmetry)."""
+    from ..normalise import bank_axis
+
+    return bank_axis(bank) if bank.symmetry else None
 
 
 def _error_json(exc: Exception) -> dict:
@@ -367,6 +409,8 @@ def make_app(editor: Editor, session: Session, *, max_body: int = MAX_BODY):
             return err
         try:
             d = await _in_thread(editor.save, payload["doc"])
+        except ConflictError as exc:
+            return JSONResponse({"ok": False, "error": _error_json(exc)}, status_code=409)
         except InputError as exc:
             return JSONResponse({"ok": False, "error": _error_json(exc)}, status_code=422)
         return JSONResponse({"ok": True, "version": d.version, "path": str(editor.yaml_path)})
