@@ -346,3 +346,10 @@ def test_abandoned_draft_flows_are_removed_on_close(bank_dir, tmp_path):
     # flows and those of the version the save replaced are gone
     assert flows == wanted | {other}
     assert other.read_bytes() == b"not ours"
+
+
+def test_browser_tests_say_why_they_skip():
+    from lipsync.editor.browser import missing
+
+    assert "chromium-driver" in missing(chromium="/bin/sh", chromedriver="/nonexistent/chromedriver")
+    assert "Debian package chromium;" in missing(chromium="/nonexistent/chromium")

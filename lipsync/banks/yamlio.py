@@ -119,5 +119,13 @@ def header_comments(text: str) -> List[str]:
 
 
 def write_bank_text(path: os.PathLike, text: str) -> None:
-    """Write bank.yaml text atomically (temporary file, fsync, rename)."""
+    """Write bank.yaml text atomically (temporary file, fsync, rename).
+
+    Examples
+    --------
+    >>> import tempfile, pathlib
+    >>> p = pathlib.Path(tempfile.mkdtemp()) / "bank.yaml"
+    >>> write_bank_text(p, "name: x"); p.read_text()
+    'name: x'
+    """
     atomic_write_bytes(Path(path), lambda fh: fh.write(text.encode("utf-8")))

@@ -26,9 +26,15 @@ FLAGS = ("--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-
          "--disable-dev-shm-usage", "--force-device-scale-factor=1")
 
 
-def missing() -> Optional[str]:
-    """Why a browser cannot be started here (None when it can)."""
-    for path, package in ((CHROMIUM, "chromium"), (CHROMEDRIVER, "chromium-driver")):
+def missing(chromium: Optional[str] = None, chromedriver: Optional[str] = None) -> Optional[str]:
+    """Why a browser cannot be started here (None when it can).
+
+    Examples
+    --------
+    >>> missing("/nonexistent/chromium")
+    '/nonexistent/chromium not found (Debian package chromium; `make test-browser` installs it)'
+    """
+    for path, package in ((chromium or CHROMIUM, "chromium"), (chromedriver or CHROMEDRIVER, "chromium-driver")):
         if not os.access(path, os.X_OK):
             return f"{path} not found (Debian package {package}; `make test-browser` installs it)"
     try:
