@@ -544,7 +544,10 @@ def _parse_feature(value, where: str, fail):
             if (not isinstance(p, (list, tuple)) or len(p) != 2
                     or not all(isinstance(c, (int, float)) and not isinstance(c, bool) for c in p)):
                 fail(f"{where}: {what} points must be [x, y] pairs of numbers, got {p!r}"[:200])
-            out.append([float(p[0]), float(p[1])])
+            try:
+                out.append([float(p[0]), float(p[1])])
+            except OverflowError:  # an integer too large for a float
+                fail(f"{where}: coordinates must be finite numbers")
         arr = np.array(out, dtype=np.float64)
         if not np.all(np.isfinite(arr)):
             fail(f"{where}: coordinates must be finite numbers")

@@ -189,3 +189,19 @@ def test_preview_draws_curves_along_the_curve():
     # on the straight chord between its ends.
     assert out[19:22, 49:52].any()
     assert not out[48:53, 40:60].any()
+
+
+def test_huge_and_odd_curve_values_are_bank_errors(tmp_path):
+    for i, value in enumerate([{"polyline": [[10 ** 400, 1], [2, 2]]}, {"bezier": [[1, 1]] * 4, "segments": 2},
+                               {"polyline": [[1, 1], [2, 2]], "segments": True}, {"bezier": "abc"},
+                               {"polyline": [[1, 1], [2, "x"]]}, {"polyline": [[float("inf"), 1], [2, 2]]}]):
+        folder = tmp_path / "b"
+        if i == 0:
+            synthetic.write_bank(folder)
+            original = yaml.safe_load((folder / "bank.yaml").read_text())
+        spec = yaml.safe_load(yaml.safe_dump(original))
+        for entry in spec["visemes"].values():
+            entry["lines"]["width"] = value
+        (folder / "bank.yaml").write_text(yaml.safe_dump(spec, sort_keys=False))
+        with pytest.raises(BankError, match=r"line 'width'"):
+            Bank.load(folder)
