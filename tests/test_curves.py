@@ -205,3 +205,47 @@ def test_huge_and_odd_curve_values_are_bank_errors(tmp_path):
         (folder / "bank.yaml").write_text(yaml.safe_dump(spec, sort_keys=False))
         with pytest.raises(BankError, match=r"line 'width'"):
             Bank.load(folder)
+
+
+from hypothesis import given, settings, strategies as st  # noqa: E402
+
+from hypothesis_profiles import FUZZ  # noqa: E402
+
+_num = st.one_of(st.integers(-10 ** 6, 10 ** 6), st.floats(allow_nan=True, allow_infinity=True),
+                 st.integers(), st.booleans(), st.text(max_size=3), st.none())
+_point = st.one_of(st.lists(_num, min_size=0, max_size=3), _num)
+_feature = st.one_of(
+    st.lists(_point, max_size=5),
+    st.fixed_dictionaries({}, optional={"polyline": st.lists(_point, max_size=8), "bezier": st.lists(_point, max_size=11),
+                                        "segments": _num, "other": _num}),
+    _num)
+
+
+@pytest.fixture(scope="module")
+def fuzz_bank(tmp_path_factory):
+    folder = synthetic.write_bank(tmp_path_factory.mktemp("fuzz") / "b")
+    return folder, yaml.safe_load((folder / "bank.yaml").read_text()), Bank.load(folder)
+
+
+# A third of the quick profile's cases: each loads a whole bank (~0.1 s on a busy machine).
+@settings(FUZZ, max_examples=40 if FUZZ.max_examples < 1000 else FUZZ.max_examples)
+@given(values=st.lists(_feature, min_size=1, max_size=4), targets=st.lists(st.sampled_from("XAOE"), min_size=1))
+def test_fuzzed_features_load_or_raise_bank_error(fuzz_bank, values, targets):
+    from lipsync.banks.yamlio import dump_bank
+
+    folder, spec, bank = fuzz_bank
+    spec = yaml.safe_load(yaml.safe_dump(spec))
+    for v, value in zip(targets, values):
+        spec["visemes"][v]["lines"]["width"] = value
+    try:
+        text = dump_bank(spec)
+    except ValueError:  # NaN/inf cannot be written by the editor's writer; write them with PyYAML
+        text = yaml.safe_dump(spec, sort_keys=False)
+    images = {f"{v}.png": bank.images[v] for v in bank.names}
+    try:
+        loaded = Bank.from_text(text, folder, images=images)
+    except BankError:
+        return
+    # loaded: every viseme's expanded lines are finite and of one count
+    counts = {loaded.lines[v].shape for v in loaded.names}
+    assert len(counts) == 1 and all(np.isfinite(loaded.lines[v]).all() for v in loaded.names)
