@@ -125,7 +125,8 @@ function drawCanvas() {
     // Left partners are labelled to the left, so the two names of a pair do not overlap.
     const left = name.endsWith("_l");
     const label = el("text", {class: "label", x: (mid[0] + nxt[0]) / 2 + (left ? -6 : 6) * u,
-      y: (mid[1] + nxt[1]) / 2 - 6 * u, fill: colour, "font-size": 11 * u, "text-anchor": left ? "end" : "start"}, g);
+      y: (mid[1] + nxt[1]) / 2 - 6 * u, fill: colour, "font-size": 12 * u, "stroke-width": 2.5 * u,
+      "text-anchor": left ? "end" : "start"}, g);
     label.textContent = name;
   }
 }
@@ -178,6 +179,7 @@ function drawFeatureList() {
     }
     li.addEventListener("click", () => select(name));
     ul.appendChild(li);
+    if (name === S.selected) li.scrollIntoView({block: "nearest"});
   }
 }
 function redraw() {
