@@ -160,3 +160,29 @@ def test_mouth_sprites_lines_go_where_the_mouth_moves(tmp_path, toon):
     for v in toon.names:
         err = np.abs(toon.lines[v][idx] - [x0, y0] - bank.lines[v][mine])
         assert err.mean() < 3.0 and err.max() < 7.0, (v, err.mean(), err.max())
+
+
+def test_nine_images_to_a_video(tmp_path):
+    """The README's path: a folder of nine mouth images, no bank.yaml -> init -> render."""
+    import sys
+    import subprocess
+
+    import synthetic
+    from lipsync.encode import probe
+
+    folder = tmp_path / "mine"
+    folder.mkdir()
+    for v, (rx, ry) in synthetic.RHUBARB_SHAPES.items():
+        cv2.imwrite(str(folder / f"face-{v}.png"), cv2.cvtColor(synthetic.draw(rx, ry), cv2.COLOR_RGB2BGR))
+    from pathlib import Path
+
+    samples = Path(__file__).resolve().parents[1] / "samples"
+    out = tmp_path / "hello.mp4"
+    for args in (["init", str(folder)],
+                 ["render", str(samples / "hello.phn"), "--bank", str(folder), "--audio", str(samples / "hello.wav"),
+                  "-o", str(out), "--quiet"]):
+        r = subprocess.run([sys.executable, "-m", "lipsync", *args], capture_output=True, text=True)
+        assert r.returncode == 0, r.stderr
+    info = probe(out)
+    assert info["streams"] == [("video", "h264"), ("audio", "aac")]
+    assert info["n_frames"] > 10 and abs(info["audio_duration"] - info["video_duration"]) < 0.1
