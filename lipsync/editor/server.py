@@ -138,6 +138,8 @@ class FlowWorker:
         with draft.lock:
             todo = [p for p in all_pairs(draft.bank.names) if not draft.pair_ready(*p)]
         with self._cond:
+            if self._draft is not None and draft.version < self._draft.version:
+                return  # two requests raced: a newer draft is queued already
             self._draft, self._todo = draft, todo
             self.total, self.done = len(todo), 0
             if first:
