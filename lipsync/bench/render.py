@@ -124,6 +124,95 @@ def _scaled_bank(src_dir: Path, out_dir: Path, size) -> Path:
     return out_dir
 
 
+#: Mouth half-width, half-height and jaw drop (in face heights) of the bench face per
+#: Rhubarb shape: X rest, A closed (M B P), B slightly open, C open, D wide open, E rounded,
+#: F puckered (OO), G teeth on lip (F V), H tongue (L).
+FACE_MOUTHS = {"X": (0.085, 0.008, 0.0), "A": (0.080, 0.004, 0.0), "B": (0.095, 0.020, 0.01),
+               "C": (0.100, 0.040, 0.025), "D": (0.105, 0.065, 0.045), "E": (0.075, 0.045, 0.03),
+               "F": (0.050, 0.035, 0.02), "G": (0.090, 0.015, 0.005), "H": (0.095, 0.045, 0.035)}
+
+
+def face_bank(folder: Path, size) -> Path:
+    """A drawn face with 30 control lines on its features only (no anchors), b = 2.
+
+    Whole-frame motion: without lines at the frame's edges, Beier-Neely weights (1/dist^2)
+    let the moving mouth and jaw drag every pixel, as on a photo subject whose lines sit on
+    the features. Nine visemes (Rhubarb's shapes), mirror-symmetric about the centre column.
+    """
+    import cv2
+    import yaml
+
+    W, H = size
+    cx, s = (W - 1) / 2.0, 0.8 * H            # axis, face height
+    top = 0.1 * H
+    folder.mkdir(parents=True, exist_ok=True)
+
+    def P(x, y):  # face coordinates (x from the axis, y from the top, in face heights) -> pixels
+        return [cx + x * s, top + y * s]
+
+    def mirror(name, p, q):
+        (x0, y0), (x1, y1) = p, q
+        return {f"{name}_l": [P(-x0, y0), P(-x1, y1)], f"{name}_r": [P(x0, y0), P(x1, y1)]}
+
+    visemes = {}
+    yy, xx = np.mgrid[0:H, 0:W].astype(np.float32)
+    for name, (mw, mh, jaw) in FACE_MOUTHS.items():
+        img = np.empty((H, W, 3), np.float32)
+        img[:] = (np.linspace(90, 160, H)[:, None, None] * np.array([0.6, 0.8, 1.0]))  # backdrop (RGB)
+        # texture, so any misplaced pixel shows (static: it moves only where the warp says)
+        img += (12 * np.sin(xx / 7.0) * np.cos(yy / 9.0))[..., None]
+        mouth_y = 0.74 + jaw / 2
+        chin_y = 0.98 + jaw
+        layers = []
+        head = (((xx - cx) / (0.36 * s)) ** 2 + ((yy - top - 0.5 * s) / (0.5 * s)) ** 2) <= 1
+        jawmask = (((xx - cx) / (0.32 * s)) ** 2 + ((yy - top - 0.62 * s) / ((chin_y - 0.62) * s)) ** 2) <= 1
+        layers.append((head | jawmask, (225, 180, 150)))
+        for sx in (-1, 1):
+            ex = cx + sx * 0.14 * s
+            layers.append(((((xx - ex) / (0.06 * s)) ** 2 + ((yy - top - 0.38 * s) / (0.025 * s)) ** 2) <= 1,
+                           (250, 250, 250)))
+            layers.append((((xx - ex) ** 2 + (yy - top - 0.38 * s) ** 2) <= (0.018 * s) ** 2, (60, 40, 30)))
+            layers.append(((np.abs(xx - ex) <= 0.07 * s) & (np.abs(yy - top - 0.30 * s) <= 0.008 * s),
+                           (90, 60, 40)))
+        layers.append(((np.abs(xx - cx) <= 0.02 * s + (yy - top - 0.42 * s) * 0.15)
+                       & (yy >= top + 0.42 * s) & (yy <= top + 0.6 * s), (200, 150, 125)))
+        lips = (((xx - cx) / ((mw + 0.012) * s)) ** 2 + ((yy - top - mouth_y * s) / ((mh + 0.012) * s)) ** 2) <= 1
+        inner = (((xx - cx) / (mw * s)) ** 2 + ((yy - top - mouth_y * s) / (mh * s)) ** 2) <= 1
+        layers.append((lips, (170, 70, 80)))
+        layers.append((inner, (70, 20, 30)))
+        layers.append((inner & (yy <= top + (mouth_y - mh + 0.02) * s), (240, 240, 235)))  # teeth
+        for mask, colour in layers:
+            # soft edges: blur the mask a little so shapes are anti-aliased
+            m = cv2.GaussianBlur(mask.astype(np.float32), (0, 0), 0.7)[..., None]
+            img = img * (1 - m) + m * np.array(colour, np.float32)
+        img = np.clip(np.rint(img), 0, 255).astype(np.uint8)
+        cv2.imwrite(str(folder / f"{name}.png"), cv2.cvtColor(img, cv2.COLOR_RGB2BGR))
+        lines = {"brow_mid": [P(-0.05, 0.28), P(0.05, 0.28)], "nose_bridge": [P(0, 0.40), P(0, 0.58)],
+                 "nose_base": [P(-0.05, 0.61), P(0.05, 0.61)], "mouth_width": [P(-mw, mouth_y), P(mw, mouth_y)],
+                 "mouth_height": [P(0, mouth_y - mh - 0.012), P(0, mouth_y + mh + 0.012)],
+                 "chin": [P(-0.08, chin_y - 0.01), P(0.08, chin_y - 0.01)],
+                 "forehead": [P(-0.1, 0.08), P(0.1, 0.08)], "philtrum": [P(0, 0.63), P(0, mouth_y - mh - 0.02)]}
+        lines.update(mirror("brow", (0.08, 0.30), (0.2, 0.29)))
+        lines.update(mirror("eye_top", (0.09, 0.375), (0.19, 0.375)))
+        lines.update(mirror("eye_bottom", (0.09, 0.39), (0.19, 0.39)))
+        lines.update(mirror("nostril", (0.03, 0.6), (0.055, 0.57)))
+        k = np.sqrt(0.5)
+        lines.update(mirror("upper_lip", (mw + 0.012, mouth_y), (k * mw, mouth_y - k * mh - 0.012)))
+        lines.update(mirror("lower_lip", (mw + 0.012, mouth_y), (k * mw, mouth_y + k * mh + 0.012)))
+        lines.update(mirror("jaw", (0.30, 0.75), (0.12, chin_y - 0.03)))
+        lines.update(mirror("cheek", (0.33, 0.45), (0.31, 0.65)))
+        lines.update(mirror("temple", (0.33, 0.15), (0.35, 0.35)))
+        lines.update(mirror("ear", (0.37, 0.4), (0.37, 0.55)))
+        lines.update(mirror("crown", (0.1, 0.02), (0.28, 0.08)))
+        assert len(lines) == 30
+        visemes[name] = {"image": f"{name}.png",
+                         "lines": {n: [[float(v) for v in p], [float(v) for v in q]] for n, (p, q) in lines.items()}}
+    spec = {"name": f"face{W}x{H}", "rest": "X", "warp": {"a": 1.0, "b": 2.0, "p": 0.5}, "symmetry": True,
+            "visemes": visemes}
+    (folder / "bank.yaml").write_text(yaml.safe_dump(spec, sort_keys=False))
+    return folder
+
+
 def bench_methods(rows: List[dict], banks: Dict[str, Path], quick: bool) -> None:
     from ..bank import Bank
     from ..preprocess import preprocess
