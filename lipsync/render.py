@@ -100,89 +100,105 @@ def _combine_kernel(tab, idx, wts, half, wc, scale, out):  # pragma: no cover - 
             out[i, j, 1] = dy
 
 
-@_nb.njit(cache=True, nogil=True, fastmath=True)
-def _warp_blend_kernel(img_a, img_b, da, db, by0, bx0, bh, bw, step, ry0, ry1, rx0, rx1, alpha, mode,
-                       out, out_b):  # pragma: no cover - compiled
+#: Packed pixels: R | G << 21 | B << 42 in one int64, so a bilinear tap is one load and one
+#: multiply for all three channels. 21-bit lanes hold 255 * 4096 (a full set of 12-bit
+#: bilinear weights) without carrying into the next lane.
+_LANE = 21
+_LANE_MASK = (1 << _LANE) - 1
+#: Sample positions are fixed-point in 1/64 px (cv2.remap uses 1/32); bilinear weights are
+#: products of two 6-bit fractions, summing to exactly 4096.
+_SUBPIXEL = 64
+#: The blend weight alpha in 1/4096 steps (cannot be seen: at most 1/16 of a grey level).
+_BLEND_ONE = 4096
+
+
+def pack_pixels(image: np.ndarray) -> np.ndarray:
+    """RGB ``uint8`` ``(H, W, 3)`` -> int64 ``(H, W)``: R | G << 21 | B << 42 (the kernel's input).
+
+    Examples
+    --------
+    >>> int(pack_pixels(np.array([[[1, 2, 3]]], np.uint8))[0, 0]) == 1 + (2 << 21) + (3 << 42)
+    True
+    """
+    p = image[..., 0].astype(np.int64)
+    p |= image[..., 1].astype(np.int64) << _LANE
+    p |= image[..., 2].astype(np.int64) << (2 * _LANE)
+    return p
+
+
+@_nb.njit(cache=True, nogil=True, fastmath=True, boundscheck=False)
+def _warp_blend_kernel(pa, pb, da, db, by0, bx0, bh, bw, step, ry0, ry1, rx0, rx1, ka, out,
+                       rowbuf, rowfull):  # pragma: no cover - compiled
     """Frame pixels [ry0, ry1) x [rx0, rx1): (1-alpha) A(Y + da(Y)) + alpha B(Y + db(Y)).
 
-    da, db: coarse displacements over the box (by0, bx0, bh, bw) with spacing ``step``
-    (zero outside the box). mode 0 writes the blend to ``out``; mode 1 writes the two warped
-    images to ``out`` and ``out_b`` (the figure rows of ``parts``).
+    pa, pb: packed images (:func:`pack_pixels`); da, db: coarse displacements over the box
+    (by0, bx0, bh, bw) with spacing ``step``, zero outside it; ka = (1 - alpha) in
+    1/4096. Per output row the coarse rows are interpolated once into ``rowfull`` (4
+    floats per pixel), so the pixel loop is only two fixed-point bilinear samples of packed
+    pixels and the blend. Edge pixels are repeated (positions are clamped to the image).
     """
-    H = img_a.shape[0]
-    W = img_a.shape[1]
+    H = pa.shape[0]
+    W = pa.shape[1]
     hc = da.shape[0]
     wc = da.shape[1]
-    wa = np.float32(1.0 - alpha)
-    wb = np.float32(alpha)
+    kb = 4096 - ka
+    xmax = (W - 1) * 64
+    ymax = (H - 1) * 64
     inv = np.float32(1.0 / step)
-    xmax = np.float32(W - 1)
-    ymax = np.float32(H - 1)
+    m = np.int64(2097151)
+    rw = rx1 - rx0
+    rowfull[:rw, :] = 0.0
     for y in range(ry0, ry1):
         yl = y - by0
-        in_y = hc > 0 and yl >= 0 and yl < bh
-        cy = (np.float32(yl) + np.float32(0.5)) * inv - np.float32(0.5)
-        cy = min(max(cy, np.float32(0.0)), np.float32(max(hc - 1, 0)))
-        i0 = int(cy)
-        fy = cy - np.float32(i0)
-        i1 = min(i0 + 1, max(hc - 1, 0))
-        for x in range(rx0, rx1):
-            xl = x - bx0
-            dax = np.float32(0.0)
-            day = np.float32(0.0)
-            dbx = np.float32(0.0)
-            dby = np.float32(0.0)
-            if in_y and xl >= 0 and xl < bw:
+        if hc > 0 and yl >= 0 and yl < bh:
+            cy = (np.float32(yl) + np.float32(0.5)) * inv - np.float32(0.5)
+            cy = min(max(cy, np.float32(0.0)), np.float32(hc - 1))
+            i0 = int(cy)
+            fy = cy - np.float32(i0)
+            i1 = min(i0 + 1, hc - 1)
+            for j in range(wc):
+                for c in range(2):
+                    rowbuf[j, c] = da[i0, j, c] + fy * (da[i1, j, c] - da[i0, j, c])
+                    rowbuf[j, 2 + c] = db[i0, j, c] + fy * (db[i1, j, c] - db[i0, j, c])
+            for xl in range(bw):
                 cx = (np.float32(xl) + np.float32(0.5)) * inv - np.float32(0.5)
                 cx = min(max(cx, np.float32(0.0)), np.float32(wc - 1))
                 j0 = int(cx)
                 fx = cx - np.float32(j0)
                 j1 = min(j0 + 1, wc - 1)
-                w00 = (np.float32(1.0) - fy) * (np.float32(1.0) - fx)
-                w01 = (np.float32(1.0) - fy) * fx
-                w10 = fy * (np.float32(1.0) - fx)
-                w11 = fy * fx
-                dax = w00 * da[i0, j0, 0] + w01 * da[i0, j1, 0] + w10 * da[i1, j0, 0] + w11 * da[i1, j1, 0]
-                day = w00 * da[i0, j0, 1] + w01 * da[i0, j1, 1] + w10 * da[i1, j0, 1] + w11 * da[i1, j1, 1]
-                dbx = w00 * db[i0, j0, 0] + w01 * db[i0, j1, 0] + w10 * db[i1, j0, 0] + w11 * db[i1, j1, 0]
-                dby = w00 * db[i0, j0, 1] + w01 * db[i0, j1, 1] + w10 * db[i1, j0, 1] + w11 * db[i1, j1, 1]
-            # A at (x + dax, y + day), edge pixels repeated (clamping the position does that)
-            sx = min(max(np.float32(x) + dax, np.float32(0.0)), xmax)
-            sy = min(max(np.float32(y) + day, np.float32(0.0)), ymax)
-            x0 = int(sx)
-            y0 = int(sy)
-            ux = sx - np.float32(x0)
-            uy = sy - np.float32(y0)
+                o = xl + bx0 - rx0
+                for c in range(4):
+                    rowfull[o, c] = rowbuf[j0, c] + fx * (rowbuf[j1, c] - rowbuf[j0, c])
+        else:
+            rowfull[:rw, :] = 0.0
+        fyy = np.float32(y)
+        for o in range(rw):
+            x = rx0 + o
+            fxx = np.float32(x)
+            sx = min(max(int((fxx + rowfull[o, 0]) * np.float32(64.0) + np.float32(0.5)), 0), xmax)
+            sy = min(max(int((fyy + rowfull[o, 1]) * np.float32(64.0) + np.float32(0.5)), 0), ymax)
+            x0 = sx >> 6
+            y0 = sy >> 6
+            ux = sx & 63
+            uy = sy & 63
             x1 = min(x0 + 1, W - 1)
             y1 = min(y0 + 1, H - 1)
-            a00 = (np.float32(1.0) - uy) * (np.float32(1.0) - ux)
-            a01 = (np.float32(1.0) - uy) * ux
-            a10 = uy * (np.float32(1.0) - ux)
-            a11 = uy * ux
-            # B at (x + dbx, y + dby)
-            tx = min(max(np.float32(x) + dbx, np.float32(0.0)), xmax)
-            ty = min(max(np.float32(y) + dby, np.float32(0.0)), ymax)
-            p0 = int(tx)
-            q0 = int(ty)
-            vx = tx - np.float32(p0)
-            vy = ty - np.float32(q0)
-            p1 = min(p0 + 1, W - 1)
-            q1 = min(q0 + 1, H - 1)
-            b00 = (np.float32(1.0) - vy) * (np.float32(1.0) - vx)
-            b01 = (np.float32(1.0) - vy) * vx
-            b10 = vy * (np.float32(1.0) - vx)
-            b11 = vy * vx
-            for c in range(3):
-                va = (a00 * np.float32(img_a[y0, x0, c]) + a01 * np.float32(img_a[y0, x1, c])
-                      + a10 * np.float32(img_a[y1, x0, c]) + a11 * np.float32(img_a[y1, x1, c]))
-                vb = (b00 * np.float32(img_b[q0, p0, c]) + b01 * np.float32(img_b[q0, p1, c])
-                      + b10 * np.float32(img_b[q1, p0, c]) + b11 * np.float32(img_b[q1, p1, c]))
-                if mode == 0:
-                    v = wa * va + wb * vb + np.float32(0.5)
-                    out[y, x, c] = np.uint8(min(v, np.float32(255.0)))
-                else:
-                    out[y, x, c] = np.uint8(min(va + np.float32(0.5), np.float32(255.0)))
-                    out_b[y, x, c] = np.uint8(min(vb + np.float32(0.5), np.float32(255.0)))
+            acc_a = (pa[y0, x0] * ((64 - ux) * (64 - uy)) + pa[y0, x1] * (ux * (64 - uy))
+                     + pa[y1, x0] * ((64 - ux) * uy) + pa[y1, x1] * (ux * uy))
+            sx = min(max(int((fxx + rowfull[o, 2]) * np.float32(64.0) + np.float32(0.5)), 0), xmax)
+            sy = min(max(int((fyy + rowfull[o, 3]) * np.float32(64.0) + np.float32(0.5)), 0), ymax)
+            x0 = sx >> 6
+            y0 = sy >> 6
+            ux = sx & 63
+            uy = sy & 63
+            x1 = min(x0 + 1, W - 1)
+            y1 = min(y0 + 1, H - 1)
+            acc_b = (pb[y0, x0] * ((64 - ux) * (64 - uy)) + pb[y0, x1] * (ux * (64 - uy))
+                     + pb[y1, x0] * ((64 - ux) * uy) + pb[y1, x1] * (ux * uy))
+            # blend in 1/4096 and round: (wa * acc_a + wb * acc_b) / 4096^2 per lane
+            out[y, x, 0] = ((acc_a & m) * ka + (acc_b & m) * kb + 8388608) >> 24
+            out[y, x, 1] = (((acc_a >> 21) & m) * ka + ((acc_b >> 21) & m) * kb + 8388608) >> 24
+            out[y, x, 2] = (((acc_a >> 42) & m) * ka + ((acc_b >> 42) & m) * kb + 8388608) >> 24
 
 
 def table_weights(t: float, steps: int) -> Tuple[np.ndarray, np.ndarray]:
@@ -300,6 +316,7 @@ class Renderer:
         self._pairs: "OrderedDict[Tuple[str, str], _Pair]" = OrderedDict()
         self._lock = threading.Lock()
         self._local = threading.local()
+        self._packed_images: Dict[str, np.ndarray] = {}
         self._full_a = np.empty((h, w, 3), np.uint8)
         self._full_b = np.empty((h, w, 3), np.uint8)
 
@@ -437,11 +454,12 @@ class Renderer:
                 self._pairs.popitem(last=False)
             return pair
 
-    def _scratch(self, hc: int, wc: int) -> Tuple[np.ndarray, np.ndarray]:
-        """Per-thread coarse displacement planes (one per side), reused across frames."""
+    def _scratch(self, hc: int, wc: int):
+        """Per-thread planes (coarse displacement per side, row buffers), reused across frames."""
         cache = getattr(self._local, "coarse", None)
         if cache is None or cache[0].shape[:2] != (hc, wc):
-            cache = (np.zeros((hc, wc, 2), np.float32), np.zeros((hc, wc, 2), np.float32))
+            cache = (np.zeros((hc, wc, 2), np.float32), np.zeros((hc, wc, 2), np.float32),
+                     np.zeros((max(wc, 1), 4), np.float32), np.zeros((self.shape[1], 4), np.float32))
             self._local.coarse = cache
         return cache
 
@@ -450,14 +468,25 @@ class Renderer:
         """Write the ROI of the frame (or, with ``out_b``, of both warped images) into ``out``."""
         ia, ib = p.inv_a, p.inv_b
         hc = ia.data.shape[1]
-        da, db = self._scratch(hc, ia.coarse_width)
+        da, db, rowbuf, rowfull = self._scratch(hc, ia.coarse_width)
         if hc:
             _fill_coarse(ia, alpha, da)
             _fill_coarse(ib, 1.0 - alpha, db)
+        pa, pb = self._packed(p.a), self._packed(p.b)
         bx, r = p.box, p.roi
-        _warp_blend_kernel(self.nb.images[p.a], self.nb.images[p.b], da, db, bx.y0, bx.x0, bx.y1 - bx.y0,
-                           bx.x1 - bx.x0, ia.step, r.y0, r.y1, r.x0, r.x1, np.float32(alpha),
-                           0 if out_b is None else 1, out, out if out_b is None else out_b)
+        geometry = (bx.y0, bx.x0, bx.y1 - bx.y0, bx.x1 - bx.x0, ia.step, r.y0, r.y1, r.x0, r.x1)
+        if out_b is None:
+            ka = int(round((1.0 - alpha) * _BLEND_ONE))
+            _warp_blend_kernel(pa, pb, da, db, *geometry, ka, out, rowbuf, rowfull)
+        else:  # the two warped images alone: all weight on one side, then on the other
+            _warp_blend_kernel(pa, pb, da, db, *geometry, _BLEND_ONE, out, rowbuf, rowfull)
+            _warp_blend_kernel(pa, pb, da, db, *geometry, 0, out_b, rowbuf, rowfull)
+
+    def _packed(self, v: str) -> np.ndarray:
+        got = self._packed_images.get(v)
+        if got is None:
+            got = self._packed_images[v] = pack_pixels(self.nb.images[v])
+        return got
 
     def _splat_parts(self, p: _Pair, alpha: float) -> Tuple[np.ndarray, np.ndarray]:
         r = p.roi
