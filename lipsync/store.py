@@ -128,8 +128,8 @@ def apply_deadzone(field: np.ndarray, deadzone: Optional[float] = None) -> np.nd
 
     Examples
     --------
-    >>> apply_deadzone(np.array([[[3.0, 4.0], [0.1, 0.0]]], np.float32), 0.5)[0].tolist()
-    [[2.700000047683716, 3.5999999046325684], [0.0, 0.0]]
+    >>> np.round(apply_deadzone(np.array([[[3.0, 4.0], [0.1, 0.0]]], np.float32), 0.5)[0].astype(float), 4).tolist()
+    [[2.7, 3.6], [0.0, 0.0]]
     """
     deadzone = FLOW_DEADZONE if deadzone is None else deadzone
     mag = np.hypot(field[..., 0], field[..., 1])
