@@ -129,9 +129,9 @@ def pair_flows(shape: Tuple[int, ...], lines_a: np.ndarray, lines_b: np.ndarray,
 # here, once, at a table of t, and stored; the renderer only interpolates the tables.
 
 #: Newton steps per table entry, warm-started from the previous entry (continuation in t).
-#: Preprocessing can afford more than a frame could: 8 steps converge to float32 noise
-#: wherever the warp does not fold (tests/test_render.py compares against 30 steps).
-TABLE_ITERATIONS = 8
+#: One more than a frame could once afford (3 from the first-order guess): 4 steps from the
+#: previous table converge wherever the warp does not fold (tests/test_render.py: vs 30 steps).
+TABLE_ITERATIONS = 4
 #: Smallest Jacobian determinant a Newton step divides by. Where the warp folds over
 #: (det <= 0) there is no unique inverse; clamping keeps those rare pixels finite.
 MIN_DET = 0.05

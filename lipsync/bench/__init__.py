@@ -79,7 +79,8 @@ def peak_mb(fn: Callable[[], object]) -> float:
 
 def _table(rows: List[dict]) -> str:
     lines = []
-    for fig in ("beier_neely_field", "frame", "end_to_end", "store"):
+    figures = list(dict.fromkeys(r["figure"] for r in rows))
+    for fig in figures:
         sel = [r for r in rows if r["figure"] == fig]
         if not sel:
             continue
@@ -93,9 +94,15 @@ def _table(rows: List[dict]) -> str:
 
 
 def _conformance_dir() -> Path:
+    # $LIPSYNC_CONFORMANCE, else the shared folder beside the checkout or a level up (a
+    # worktree sits one level deeper than the main checkout), else the tests' copies
     root = Path(__file__).resolve().parents[2]
-    shared = root.parent / "shared" / "conformance" / "mfa"
-    return shared if shared.is_dir() else root / "tests" / "data" / "conformance" / "mfa"
+    candidates = [Path(os.environ["LIPSYNC_CONFORMANCE"]) / "mfa"] if os.environ.get("LIPSYNC_CONFORMANCE") else []
+    candidates += [up / "shared" / "conformance" / "mfa" for up in (root.parent, root.parent.parent)]
+    for c in candidates:
+        if (c / "acoustic_corpus.wav").is_file():
+            return c
+    return root / "tests" / "data" / "conformance" / "mfa"
 
 
 def main(argv=None) -> int:

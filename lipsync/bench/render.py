@@ -8,7 +8,12 @@
    frame reads and writes (two images and two flows in, one frame out);
 3. ``lipsync render`` end to end (render + H.264/AAC encode) of the 26.7 s MFA recording
    as a multiple of real time, flows cached, at 512x512 and 1280x720;
-4. flow store bytes per field pixel.
+4. flow store bytes per field pixel;
+5. whole-frame motion (a drawn face, 30 lines on its features, no anchors, b = 2) at
+   512x512 and 1280x720: flow frame against the classic Beier-Neely frame and against a
+   memory copy of the same bytes, on one core; first-frame latency of an untouched pair;
+   ``lipsync render`` of the MFA recording; store bytes per field pixel;
+6. x264 presets: wall time and file size of the same ``lipsync render``.
 
 """
 
@@ -282,7 +287,7 @@ def bench_store(rows: List[dict], banks: Dict[str, Path]) -> None:
     for label, path in banks.items():
         bank = Bank.load(path)
         store = FlowStore.for_bank(bank)
-        flows = sorted((store.root / "flows").glob("*.npz"))
+        flows = sorted((store.root / "flows").glob("*.flow"))
         n_fields = 2 * len(all_pairs(bank.names))
         total = sum(p.stat().st_size for p in flows)
         h, w = bank.shape
@@ -320,3 +325,152 @@ def _end_to_end(ctx: Context, rows: List[dict]) -> None:
 @FIGURES.decorator("store")
 def _store(ctx: Context, rows: List[dict]) -> None:
     bench_store(rows, _toon_banks(ctx))
+
+
+# --------------------------------------------------------------------------- whole-frame motion
+
+def _face_banks(ctx: Context) -> Dict[str, Path]:
+    """The drawn face (30 lines on the features, no anchors) at 512x512 and 1280x720."""
+    banks = {"512x512": ctx.tmp / "face512", "1280x720": ctx.tmp / "face720"}
+    for label, size in (("512x512", (512, 512)), ("1280x720", (1280, 720))):
+        if not banks[label].exists():
+            face_bank(banks[label], size)
+    return banks
+
+
+def _preprocessed(path: Path):
+    from ..bank import Bank
+    from ..preprocess import preprocess
+    from ..store import FlowStore
+
+    bank = Bank.load(path)
+    store = FlowStore.for_bank(bank)
+    t = time.perf_counter()
+    report = preprocess(bank, store=store, quiet=True)
+    return bank, store, (time.perf_counter() - t) if report.computed else None
+
+
+def bench_whole_frame(rows: List[dict], banks: Dict[str, Path], quick: bool) -> None:
+    """Flow frame vs classic Beier-Neely frame vs memory copy, one core, whole-frame motion."""
+    import cv2
+
+    from ..render import Renderer
+
+    threads = cv2.getNumThreads()
+    cv2.setNumThreads(1)  # one core: the classic warp's cv2.remap would otherwise use both
+    try:
+        pairs = [("X", "D"), ("A", "C"), ("B", "F"), ("E", "H")]
+        for label, path in banks.items():
+            bank, store, prep_s = _preprocessed(path)
+            flow = Renderer(bank, store=store)
+            out = np.empty(bank.shape + (3,), np.uint8)
+            alphas = np.linspace(0.1, 0.9, 9)
+            for a, b in pairs:  # warm-up: pair states, compiled kernels
+                flow.render(a, b, 0.5, out=out)
+
+            def flow_frames():
+                for a, b in pairs:
+                    for al in alphas:
+                        flow.render(a, b, float(al), out=out)
+
+            flow_ms = median_ms(flow_frames, 3 if quick else 7, warmup=0) / (len(pairs) * len(alphas))
+            classic = Renderer(bank, method="beier-neely", store=store)
+            bn_ms = median_ms(lambda: classic.render("X", "D", 0.4), 1 if quick else 3)
+            # the same bytes as a flow frame: two images and two float16 flows in, a frame out
+            # (round one's definition), and the bytes this renderer really reads (two images,
+            # four int16 tables per side on the coarse grid) and writes
+            img = bank.images["X"]
+            pair = flow._pair("X", "D")
+            tables = [np.array(pair.inv_a.data), np.array(pair.inv_b.data)]
+            f16 = [np.zeros(img.shape[:2] + (2,), np.float16) for _ in range(2)]
+            srcs_round1 = [img, img.copy()] + f16
+            srcs_now = [img, img.copy()] + tables
+            copy = {}
+            for name, srcs in (("round1", srcs_round1), ("now", srcs_now)):
+                dsts = [np.empty_like(s) for s in srcs]
+                frame = np.empty_like(img)
+
+                def copy_bytes(srcs=srcs, dsts=dsts, frame=frame):
+                    for s, d in zip(srcs, dsts):
+                        np.copyto(d, s)
+                    np.copyto(frame, img)
+
+                copy[name] = median_ms(copy_bytes, 50)
+            # first frame of a pair nobody touched yet: load (map + CRC) and render
+            first = []
+            for a, b in (("C", "G"), ("D", "F"), ("G", "H"), ("B", "E"), ("A", "H")):
+                fresh = Renderer(bank, store=store)
+                fresh.render("X", "X", 0.0, out=out)
+                t = time.perf_counter()
+                fresh.render(a, b, 0.5, out=out)
+                first.append((time.perf_counter() - t) * 1e3)
+            roi = pair.roi
+            rows.append({
+                "figure": "whole_frame", "size": label, "lines": len(bank.line_names),
+                "moving_fraction": round((roi.y1 - roi.y0) * (roi.x1 - roi.x0) / (bank.shape[0] * bank.shape[1]), 2),
+                "flow_ms": round(flow_ms, 3), "fps_one_core": round(1000.0 / flow_ms, 1),
+                "beier_neely_ms": round(bn_ms, 1), "beier_neely_over_flow": round(bn_ms / flow_ms, 1),
+                "memcpy_ms": round(copy["round1"], 3), "flow_over_memcpy": round(flow_ms / copy["round1"], 1),
+                "memcpy_read_bytes_ms": round(copy["now"], 3),
+                "flow_over_memcpy_read_bytes": round(flow_ms / copy["now"], 1),
+                "first_frame_ms": round(float(np.median(first)), 2),
+                "preprocess_s": None if prep_s is None else round(prep_s, 1),
+            })
+    finally:
+        cv2.setNumThreads(threads)
+
+
+def bench_presets(rows: List[dict], banks: Dict[str, Path], timeline: Path, audio: Path, quick: bool) -> None:
+    """x264 presets for ``lipsync render``: wall time and file size, same clip, flows cached."""
+    from ..clip import render_clip
+
+    for label, path in banks.items():
+        _preprocessed(path)
+        for preset in ("ultrafast", "superfast", "veryfast", "faster"):
+            with tempfile.TemporaryDirectory() as tmp:
+                out = Path(tmp) / "out.mp4"
+                walls = []
+                for _ in range(1 if quick else 2):
+                    t = time.perf_counter()
+                    report = render_clip(timeline, out, bank=path, audio=audio, preset=preset, quiet=True)
+                    walls.append(time.perf_counter() - t)
+                rows.append({"figure": "preset", "size": label, "preset": preset,
+                             "wall_s": round(min(walls), 2), "x_real_time": round(report.duration / min(walls), 1),
+                             "mb": round(out.stat().st_size / 1e6, 2),
+                             "kbit_s": round(out.stat().st_size * 8 / 1e3 / report.duration)})
+
+
+@FIGURES.decorator("whole_frame")
+def _whole_frame(ctx: Context, rows: List[dict]) -> None:
+    bench_whole_frame(rows, _face_banks(ctx), ctx.quick)
+
+
+@FIGURES.decorator("whole_frame_end_to_end")
+def _whole_frame_end_to_end(ctx: Context, rows: List[dict]) -> None:
+    audio = ctx.mfa / "acoustic_corpus.wav"
+    if audio.exists():
+        banks = _face_banks(ctx)
+        for path in banks.values():
+            _preprocessed(path)
+        before = len(rows)
+        bench_end_to_end(rows, banks, ctx.mfa / "acoustic_corpus.TextGrid", audio)
+        for r in rows[before:]:
+            r["figure"] = "whole_frame_end_to_end"
+
+
+@FIGURES.decorator("whole_frame_store")
+def _whole_frame_store(ctx: Context, rows: List[dict]) -> None:
+    banks = _face_banks(ctx)
+    for path in banks.values():
+        _preprocessed(path)
+    before = len(rows)
+    bench_store(rows, banks)
+    for r in rows[before:]:
+        r["figure"] = "whole_frame_store"
+
+
+@FIGURES.decorator("preset")
+def _preset(ctx: Context, rows: List[dict]) -> None:
+    audio = ctx.mfa / "acoustic_corpus.wav"
+    if audio.exists():
+        bench_presets(rows, _face_banks(ctx), ctx.mfa / "acoustic_corpus.TextGrid", audio, ctx.quick)
