@@ -235,7 +235,7 @@ def render_clip(timeline, output: PathLike, *, bank=None, audio: Optional[PathLi
     from .bank import Bank
     from .encode import format_for, open_writer
     from .errors import InputError
-    from .preprocess import preprocess
+    from .preprocess import all_pairs, preprocess
     from .store import FlowStore
 
     t0 = time.perf_counter()
@@ -249,7 +249,12 @@ def render_clip(timeline, output: PathLike, *, bank=None, audio: Optional[PathLi
     anim = Animator(bank, timeline, fps=fps, map=map, method=method, timing=timing, store=store,
                     timeline_options=timeline_options)
     if method in ("flow", "splat"):
-        preprocess(bank, store=store, jobs=jobs, quiet=quiet, normalised=anim.renderer.nb)
+        # Only when an entry is missing: checking all of them (a CRC pass over every pair)
+        # would cost more than rendering a short clip. A damaged entry is still caught --
+        # when the renderer maps it -- and recomputed there with a warning.
+        nb = anim.renderer.nb
+        if any(not store.pair_path(store.pair_key(bank, a, b, nb.axis)).exists() for a, b in all_pairs(bank.names)):
+            preprocess(bank, store=store, jobs=jobs, quiet=quiet, normalised=nb)
     h, w = anim.renderer.shape
     t1 = time.perf_counter()
     n = len(anim)
