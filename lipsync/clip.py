@@ -260,6 +260,7 @@ def render_clip(timeline, output: PathLike, *, bank=None, audio: Optional[PathLi
     n = len(anim)
     # beier-neely keeps whole-frame scratch in the renderer: one thread; the rest are thread-safe
     threads = 1 if anim.renderer.method == "beier-neely" else None
+    anim.renderer.frame_threads = 1  # whole frames run in parallel instead
     with open_writer(output, fps=fps, size=(w, h), format=out_format, audio=audio,
                      crf=crf, preset=preset, quiet=True, frames=n or None) as writer:
         with tqdm(total=n, desc="render", unit="frame", disable=quiet, leave=False) as bar:

@@ -382,6 +382,7 @@ def bench_whole_frame(rows: List[dict], banks: Dict[str, Path], quick: bool) -> 
         for label, path in banks.items():
             bank, store, prep_s = _preprocessed(path)
             flow = Renderer(bank, store=store)
+            flow.frame_threads = 1  # one core
             out = np.empty(bank.shape + (3,), np.uint8)
             alphas = np.linspace(0.1, 0.9, 9)
             for a, b in pairs:  # warm-up: pair states, compiled kernels
@@ -392,9 +393,12 @@ def bench_whole_frame(rows: List[dict], banks: Dict[str, Path], quick: bool) -> 
                     for al in alphas:
                         flow.render(a, b, float(al), out=out)
 
-            flow_ms = median_ms(flow_frames, 3 if quick else 7, warmup=0) / (len(pairs) * len(alphas))
+            n_frames = len(pairs) * len(alphas)
+            flow_ms = median_ms(flow_frames, 3 if quick else 7, warmup=0) / n_frames
+            flow_cpu = median_ms(flow_frames, 3 if quick else 7, warmup=0, clock=time.thread_time) / n_frames
             classic = Renderer(bank, method="beier-neely", store=store)
             bn_ms = median_ms(lambda: classic.render("X", "D", 0.4), 1 if quick else 3)
+            bn_cpu = median_ms(lambda: classic.render("X", "D", 0.4), 1 if quick else 3, clock=time.thread_time)
             # the same bytes as a flow frame: two images and two float16 flows in, a frame out
             # (round one's definition), and the bytes this renderer really reads (two images,
             # four int16 tables per side on the coarse grid) and writes
@@ -415,10 +419,13 @@ def bench_whole_frame(rows: List[dict], banks: Dict[str, Path], quick: bool) -> 
                     np.copyto(frame, img)
 
                 copy[name] = median_ms(copy_bytes, 50)
+                copy[name + "_cpu"] = median_ms(lambda: [copy_bytes() for _ in range(20)], 10,
+                                                clock=time.thread_time) / 20
             # first frame of a pair nobody touched yet: load (map + CRC) and render
             first = []
             for a, b in (("C", "G"), ("D", "F"), ("G", "H"), ("B", "E"), ("A", "H")):
                 fresh = Renderer(bank, store=store)
+                fresh.frame_threads = 1
                 fresh.render("X", "X", 0.0, out=out)
                 t = time.perf_counter()
                 fresh.render(a, b, 0.5, out=out)
@@ -432,6 +439,11 @@ def bench_whole_frame(rows: List[dict], banks: Dict[str, Path], quick: bool) -> 
                 "memcpy_ms": round(copy["round1"], 3), "flow_over_memcpy": round(flow_ms / copy["round1"], 1),
                 "memcpy_read_bytes_ms": round(copy["now"], 3),
                 "flow_over_memcpy_read_bytes": round(flow_ms / copy["now"], 1),
+                "cpu_flow_ms": round(flow_cpu, 3), "cpu_beier_neely_ms": round(bn_cpu, 1),
+                "cpu_beier_neely_over_flow": round(bn_cpu / flow_cpu, 1),
+                "cpu_memcpy_ms": round(copy["round1_cpu"], 3),
+                "cpu_flow_over_memcpy": round(flow_cpu / copy["round1_cpu"], 1),
+                "cpu_fps_one_core": round(1000.0 / flow_cpu, 1),
                 "first_frame_ms": round(float(np.median(first)), 2),
                 "preprocess_s": None if prep_s is None else round(prep_s, 1),
             })
