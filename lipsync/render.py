@@ -45,7 +45,7 @@ from .errors import InputError
 from .flows import pair_flows
 from .normalise import NormalisedBank, normalise
 from .registry import Registry
-from .store import Crop, FlowStore, InverseTables, StoredField, pack_pair, unpack_pair
+from .store import Crop, FlowStore, InverseTables, StoredField, pack_pair, union_box, unpack_pair
 from .warp import beier_neely_map, identity_grid
 
 #: Splat holes are filled by Telea inpainting with this radius (px): holes from
@@ -73,8 +73,10 @@ for _name, _why in [("flow", "interpolate the cached flows (fast, default)"),
 # the two inverse displacements are read bilinearly off the coarse tables, both images are
 # sampled bilinearly (edge pixels repeated) and blended. No full-resolution map is ever
 # materialised: cv2.remap would need one per side (resize + convertMaps + remap: three
-# passes over 8-byte-per-pixel maps) and its own bilinear loop is slower than this one
-# (measured in lipsync/bench/render.py). nogil: frames render in parallel threads.
+# passes over 8-byte-per-pixel maps) and a fourth for the blend. On one core a whole-frame
+# flow frame costs about half the CPU of round one's per-frame Newton + cv2.remap path
+# (toon 512x512 2.2x less, drawn face 1.9x, measured side by side). nogil: frames, or row
+# bands of one frame, render in parallel threads.
 
 import numba as _nb
 
@@ -159,7 +161,8 @@ def _warp_blend_kernel(pa, pb, da, db, by0, bx0, bh, bw, step, ry0, ry1, rx0, rx
             cy = min(max(cy, np.float32(0.0)), np.float32(hc - 1))
             i0 = int(cy)
             fy = cy - np.float32(i0)
-            i1 = min(i0 + 1, hc - 1)
+            i1 = np.uint64(min(i0 + 1, hc - 1))
+            i0 = np.uint64(i0)
             for j in range(wc):
                 for c in range(2):
                     rowbuf[j, c] = da[i0, j, c] + fy * (da[i1, j, c] - da[i0, j, c])
@@ -169,8 +172,9 @@ def _warp_blend_kernel(pa, pb, da, db, by0, bx0, bh, bw, step, ry0, ry1, rx0, rx
                 cx = min(max(cx, np.float32(0.0)), np.float32(wc - 1))
                 j0 = int(cx)
                 fx = cx - np.float32(j0)
-                j1 = min(j0 + 1, wc - 1)
-                o = xl + bx0 - rx0
+                j1 = np.uint64(min(j0 + 1, wc - 1))
+                j0 = np.uint64(j0)
+                o = np.uint64(xl + bx0 - rx0)
                 for c in range(4):
                     rowfull[o, c] = rowbuf[j0, c] + fx * (rowbuf[j1, c] - rowbuf[j0, c])
         else:
@@ -185,8 +189,10 @@ def _warp_blend_kernel(pa, pb, da, db, by0, bx0, bh, bw, step, ry0, ry1, rx0, rx
             y0 = sy >> 6
             ux = sx & 63
             uy = sy & 63
-            x1 = min(x0 + 1, W - 1)
-            y1 = min(y0 + 1, H - 1)
+            x1 = np.uint64(min(x0 + 1, W - 1))  # unsigned indices: numba then skips its
+            y1 = np.uint64(min(y0 + 1, H - 1))  # negative-index wraparound (~15% of the loop)
+            x0 = np.uint64(x0)
+            y0 = np.uint64(y0)
             acc_a = (pa[y0, x0] * ((64 - ux) * (64 - uy)) + pa[y0, x1] * (ux * (64 - uy))
                      + pa[y1, x0] * ((64 - ux) * uy) + pa[y1, x1] * (ux * uy))
             sx = min(max(int((fxx + rowfull[o, 2]) * np.float32(64.0) + np.float32(0.5)), 0), xmax)
@@ -195,8 +201,10 @@ def _warp_blend_kernel(pa, pb, da, db, by0, bx0, bh, bw, step, ry0, ry1, rx0, rx
             y0 = sy >> 6
             ux = sx & 63
             uy = sy & 63
-            x1 = min(x0 + 1, W - 1)
-            y1 = min(y0 + 1, H - 1)
+            x1 = np.uint64(min(x0 + 1, W - 1))  # unsigned indices: numba then skips its
+            y1 = np.uint64(min(y0 + 1, H - 1))  # negative-index wraparound (~15% of the loop)
+            x0 = np.uint64(x0)
+            y0 = np.uint64(y0)
             acc_b = (pb[y0, x0] * ((64 - ux) * (64 - uy)) + pb[y0, x1] * (ux * (64 - uy))
                      + pb[y1, x0] * ((64 - ux) * uy) + pb[y1, x1] * (ux * uy))
             # blend in 1/4096 and round: (wa * acc_a + wb * acc_b) / 4096^2 per lane
@@ -246,15 +254,6 @@ class _Pair:
     fwd_field: StoredField     # the flows themselves, only for splat
     bwd_field: StoredField
     splat_state: Optional[tuple] = None  # (fwd, bwd, grid) over the ROI, made on first splat
-
-
-def _union(boxes, shape, margin) -> Crop:
-    boxes = [b for b in boxes if not b.empty]
-    if not boxes:
-        return Crop(0, 0, 0, 0)
-    h, w = shape
-    return Crop(max(0, min(b.y0 for b in boxes) - margin), min(h, max(b.y1 for b in boxes) + margin),
-                max(0, min(b.x0 for b in boxes) - margin), min(w, max(b.x1 for b in boxes) + margin))
 
 
 def _difference_box(a: np.ndarray, b: np.ndarray) -> Crop:
@@ -455,7 +454,7 @@ class Renderer:
                 return pair
             fwd, bwd = self._flows(a, b)
             box = fwd.inverse.box
-            roi = _union([box, _difference_box(self.nb.images[a], self.nb.images[b])], self.shape, 0)
+            roi = union_box([box, _difference_box(self.nb.images[a], self.nb.images[b])], self.shape, 0)
             pair = _Pair(a=a, b=b, roi=roi, box=box, inv_a=fwd.inverse, inv_b=bwd.inverse,
                          fwd_field=fwd, bwd_field=bwd)
             self._pairs[key] = pair

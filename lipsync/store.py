@@ -445,7 +445,14 @@ def _read_flat_entry(path: Path) -> Tuple[dict, Dict[str, np.ndarray]]:
     return meta, arrays
 
 
-def _union_box(boxes, shape, margin) -> "Crop":
+def union_box(boxes, shape, margin: int) -> "Crop":
+    """The box around all non-empty ``boxes``, grown by ``margin`` and clipped to ``shape``.
+
+    Examples
+    --------
+    >>> union_box([Crop(2, 4, 2, 4), Crop(0, 0, 0, 0), Crop(3, 6, 5, 7)], (8, 8), 1)
+    Crop(y0=1, y1=7, x0=1, x1=8)
+    """
     boxes = [b for b in boxes if not b.empty]
     if not boxes:
         return Crop(0, 0, 0, 0)
@@ -479,7 +486,7 @@ def pack_pair(forward: np.ndarray, backward: np.ndarray, *, axis: Optional[float
         arrays[name] = part.astype(np.float16)
         meta[name] = {"crop": [crop.y0, crop.y1, crop.x0, crop.x1], "half": half}
     fwd, bwd = unpack_pair(meta, arrays, shape, tables=False)
-    box = _union_box([fwd.crop, bwd.crop], shape, TABLE_MARGIN)
+    box = union_box([fwd.crop, bwd.crop], shape, TABLE_MARGIN)
     bh, bw = box.y1 - box.y0, box.x1 - box.x0
     wc = -(-bw // SOLVE_STEP)
     # Mirror-symmetric coarse grid: the box symmetric about the axis and of even width (its

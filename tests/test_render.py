@@ -198,7 +198,7 @@ def test_rendering_only_the_moving_region_changes_nothing(tmp_path, monkeypatch)
     roi = r._pair("X", "Y").roi
     whole = render_mod.Crop(0, bank.shape[0], 0, bank.shape[1])
     frame = r.render("X", "Y", 0.5).copy()
-    monkeypatch.setattr(render_mod, "_union", lambda boxes, shape, margin: whole)
+    monkeypatch.setattr(render_mod, "union_box", lambda boxes, shape, margin: whole)
     full = Renderer(bank).render("X", "Y", 0.5)
     assert (roi.y1 - roi.y0) * (roi.x1 - roi.x0) < 0.6 * bank.shape[0] * bank.shape[1]
     # outside the box the flow is below 0.1 px: at most a level or two on the eyes' edges
