@@ -32,8 +32,10 @@ PathLike = Union[str, "os.PathLike[str]"]
 #: 25 fps is PAL video's rate and enough for lips (Rhubarb needs >= 24 for hard cuts;
 #: morphs look smooth well below that, so lower rates are allowed).
 DEFAULT_FPS = 25.0
-#: crf 18 is visually lossless for drawn faces; "veryfast" keeps encoding well ahead of
-#: real time on two cores at 512x512 (the flat colours compress well at any preset).
+#: crf 18 is visually lossless for drawn faces. "veryfast": measured against ultrafast,
+#: superfast and faster on the same clip (bench figure "preset"), it was within noise of
+#: the fastest in wall and CPU time (rendering dominates, not encoding) and made files 2-5x
+#: smaller than ultrafast/superfast (0.46 MB vs 1.44 MB for 26.7 s at 512x512).
 DEFAULT_CRF = 18
 DEFAULT_PRESET = "veryfast"
 
