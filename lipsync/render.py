@@ -257,7 +257,8 @@ class _Pair:
 
 
 def _difference_box(a: np.ndarray, b: np.ndarray) -> Crop:
-    diff = np.any(a != b, axis=2)
+    """Box of the pixels where ``a`` and ``b`` differ (packed ``(H, W)`` or ``(H, W, 3)`` images)."""
+    diff = a != b if a.ndim == 2 else np.any(a != b, axis=2)
     rows = np.flatnonzero(diff.any(axis=1))
     if rows.size == 0:
         return Crop(0, 0, 0, 0)
@@ -454,7 +455,7 @@ class Renderer:
                 return pair
             fwd, bwd = self._flows(a, b)
             box = fwd.inverse.box
-            roi = union_box([box, _difference_box(self.nb.images[a], self.nb.images[b])], self.shape, 0)
+            roi = union_box([box, _difference_box(self._packed(a), self._packed(b))], self.shape, 0)
             pair = _Pair(a=a, b=b, roi=roi, box=box, inv_a=fwd.inverse, inv_b=bwd.inverse,
                          fwd_field=fwd, bwd_field=bwd)
             self._pairs[key] = pair

@@ -259,9 +259,13 @@ class FlowStore:
 
     def pair_key(self, bank: Bank, a: str, b: str, axis: Optional[float]) -> str:
         """The key of the entry for the ordered pair (a, b)."""
+        from .flows import SOLVE_STEP, TABLE_ITERATIONS, TABLE_STEPS
+
         w = bank.warp
         return self._key([
             f"lipsync-flow-v{FORMAT_VERSION}".encode(),
+            # how the inverse tables are made: changing any of these must miss old entries
+            json.dumps([TABLE_STEPS, TABLE_ITERATIONS, SOLVE_STEP, TABLE_SCALE, TABLE_MARGIN]).encode(),
             repr(bank.shape).encode(),
             bank.image_digest(a).encode(), bank.image_digest(b).encode(),
             np.ascontiguousarray(bank.lines[a]).tobytes(), np.ascontiguousarray(bank.lines[b]).tobytes(),
