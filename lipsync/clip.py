@@ -1,4 +1,4 @@
-"""One clip end to end: a timeline (or audio) and a bank in, an mp4 or PNG frames out.
+r"""One clip end to end: a timeline (or audio) and a bank in, an mp4 or PNG frames out.
 
 The stages in order (DESIGN.md), shared by ``lipsync render``, ``lipsync batch`` and
 ``lipsync serve`` so that every entry point makes the same file from the same inputs::
@@ -15,7 +15,7 @@ Examples
 >>> _ = open(tl, "w").write("0.00\tX\n0.20\tD\n0.60\tX\n")
 >>> report = render_clip(tl, os.path.join(d, "frames"), format="png", quiet=True)
 >>> report.frames, sorted(os.listdir(os.path.join(d, "frames")))[:2]
-(15, ['000000.png', '000001.png'])
+(15, ['frame_000000.png', 'frame_000001.png'])
 """
 
 from __future__ import annotations
@@ -32,8 +32,10 @@ PathLike = Union[str, "os.PathLike[str]"]
 #: 25 fps is PAL video's rate and enough for lips (Rhubarb needs >= 24 for hard cuts;
 #: morphs look smooth well below that, so lower rates are allowed).
 DEFAULT_FPS = 25.0
-#: crf 18 is visually lossless for drawn faces; "veryfast" keeps encoding well ahead of
-#: real time on two cores at 512x512 (the flat colours compress well at any preset).
+#: crf 18 is visually lossless for drawn faces. "veryfast": measured against ultrafast,
+#: superfast and faster on the same clip (bench figure "preset"), it was within noise of
+#: the fastest in wall and CPU time (rendering dominates, not encoding) and made files 2-5x
+#: smaller than ultrafast/superfast (0.46 MB vs 1.44 MB for 26.7 s at 512x512).
 DEFAULT_CRF = 18
 DEFAULT_PRESET = "veryfast"
 
@@ -151,6 +153,45 @@ def write_overlapped(frames, write) -> None:
         raise failure[0]
 
 
+def render_parallel(render_into, n: int, shape, write, *, threads: Optional[int] = None, progress=None) -> None:
+    """Render frames ``0..n-1`` on worker threads and ``write`` them in order from this one.
+
+    ``render_into(i, buf)`` fills ``buf`` (a ``shape`` uint8 array) with frame i; it must be
+    safe to call from several threads (the renderer's kernels release the GIL, so threads
+    render in parallel). At most :data:`QUEUE_FRAMES` frames are in flight, each in its own
+    buffer, so memory stays flat; writing (a pipe to ffmpeg, which encodes on its own
+    threads) overlaps rendering. An error on either side stops both and is raised here.
+    """
+    from concurrent.futures import ThreadPoolExecutor
+
+    import numpy as np
+
+    threads = max(1, int(threads or os.cpu_count() or 1))
+    depth = max(QUEUE_FRAMES, 2 * threads)
+    free = [np.empty(shape, np.uint8) for _ in range(min(depth, n))]
+    pending = {}
+
+    def job(i, buf):
+        render_into(i, buf)
+        return buf
+
+    with ThreadPoolExecutor(max_workers=threads, thread_name_prefix="lipsync-render") as ex:
+        try:
+            nxt = 0
+            for i in range(n):
+                while nxt < n and free:
+                    pending[nxt] = ex.submit(job, nxt, free.pop())
+                    nxt += 1
+                buf = pending.pop(i).result()
+                write(buf)
+                if progress is not None:
+                    progress.update(1)
+                free.append(buf)
+        finally:
+            for fut in pending.values():
+                fut.cancel()
+
+
 def render_clip(timeline, output: PathLike, *, bank=None, audio: Optional[PathLike] = None,
                 fps: float = DEFAULT_FPS, map=None, method: str = "flow", timing=DEFAULT_CURVE,
                 format: Optional[str] = None, crf: int = DEFAULT_CRF, preset: str = DEFAULT_PRESET,
@@ -196,7 +237,7 @@ def render_clip(timeline, output: PathLike, *, bank=None, audio: Optional[PathLi
     from .bank import Bank
     from .encode import format_for, open_writer
     from .errors import InputError
-    from .preprocess import preprocess
+    from .preprocess import all_pairs, preprocess
     from .store import FlowStore
 
     t0 = time.perf_counter()
@@ -215,14 +256,23 @@ def render_clip(timeline, output: PathLike, *, bank=None, audio: Optional[PathLi
     anim = Animator(bank, timeline, fps=fps, map=map, method=method, timing=timing, store=store,
                     timeline_options=timeline_options)
     if method in ("flow", "splat"):
-        preprocess(bank, store=store, jobs=jobs, quiet=quiet, normalised=anim.renderer.nb)
+        # Only when an entry is missing: checking all of them (a CRC pass over every pair)
+        # would cost more than rendering a short clip. A damaged entry is still caught --
+        # when the renderer maps it -- and recomputed there with a warning.
+        nb = anim.renderer.nb
+        if any(not store.pair_path(store.pair_key(bank, a, b, nb.axis)).exists() for a, b in all_pairs(bank.names)):
+            preprocess(bank, store=store, jobs=jobs, quiet=quiet, normalised=nb)
     h, w = anim.renderer.shape
     t1 = time.perf_counter()
+    n = len(anim)
+    # beier-neely keeps whole-frame scratch in the renderer: one thread; the rest are thread-safe
+    threads = 1 if anim.renderer.method == "beier-neely" else None
+    anim.renderer.frame_threads = 1  # whole frames run in parallel instead
     with open_writer(output, fps=fps, size=(w, h), format=out_format, audio=audio,
-                     crf=crf, preset=preset, quiet=True) as writer:
-        frames = tqdm(anim.frames(copy=False), total=len(anim), desc="render", unit="frame",
-                      disable=quiet, leave=False)
-        write_overlapped(frames, writer.write)
+                     crf=crf, preset=preset, quiet=True, frames=n or None) as writer:
+        with tqdm(total=n, desc="render", unit="frame", disable=quiet, leave=False) as bar:
+            render_parallel(lambda i, buf: anim.frame(i, out=buf), n, (h, w, 3), writer.write,
+                            threads=threads, progress=bar)
     t2 = time.perf_counter()
     return ClipReport(output=str(output), frames=len(anim), fps=float(fps), size=(w, h), method=method,
                       seconds_setup=t1 - t0, seconds_render=t2 - t1)

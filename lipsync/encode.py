@@ -16,11 +16,13 @@ mp4 details
     pixel that repeats the last column/row (padding rather than cropping keeps every drawn
     pixel; repeating the edge avoids a dark seam bleeding into chroma).
 
-    With ``audio=FILE`` the video length is authoritative (``n_frames / fps``): the video is
-    encoded first, then muxed with the audio, which starts at the first frame (t = 0),
-    is padded with silence when short (``apad``) and cut at the video's duration (``-t``)
-    when long. This needs the frame count, which is only known at the end, hence the
-    separate (cheap, stream-copy) mux pass rather than a single pass with ``-shortest``.
+    With ``audio=FILE`` the video length is authoritative (``n_frames / fps``): the audio
+    starts at the first frame (t = 0), is padded with silence when short (``apad``) and cut
+    at the video's duration (``-t``) when long. When the caller announces the frame count
+    (``frames=N``, as :func:`lipsync.clip.render_clip` does) one ffmpeg process encodes the
+    video and the audio together; writing any other number of frames is then an error.
+    Otherwise the count is only known at the end: the video is encoded first, then muxed
+    with the audio in a second (cheap, stream-copy) pass rather than with ``-shortest``.
 
 PNG sequence details
     Frame ``i`` (0-based, so it shows time ``i / fps``) is ``OUT/frame_000000.png`` etc.
@@ -355,8 +357,14 @@ class Mp4Writer(Writer):
     extension = ".mp4"
 
     def __init__(self, out: PathLike, *, fps: float, size: Tuple[int, int], audio: Optional[PathLike] = None,
-                 crf: int = 18, preset: str = "medium", quiet: bool = False, total: Optional[int] = None):
+                 crf: int = 18, preset: str = "medium", quiet: bool = False, total: Optional[int] = None,
+                 frames: Optional[int] = None):
         self.audio = _check_audio(audio) if audio is not None else None
+        if frames is not None and int(frames) < 1:
+            raise ValueError(f"frames must be a positive count, got {frames!r}")
+        self.frames = None if frames is None else int(frames)
+        # one ffmpeg process for video and audio when the length is known up front
+        self.single_pass = self.audio is not None and self.frames is not None
         self.crf = int(crf)
         self.preset = str(preset)
         self._proc: Optional[subprocess.Popen] = None
@@ -388,8 +396,9 @@ class Mp4Writer(Writer):
         # With audio the video goes to an intermediate file and is muxed once its length is
         # known. mp4, not mkv: matroska rounds timestamps to 1 ms, which would make 60 or
         # 29.97 fps video slightly variable-rate after the stream copy.
-        self.video_path = self._temp_name("video", ".mp4") if self.audio else self.partial
-        if self.audio:
+        two_pass = self.audio is not None and not self.single_pass
+        self.video_path = self._temp_name("video", ".mp4") if two_pass else self.partial
+        if two_pass:
             self._reserve(self.video_path)
         width, height = self.size
         self._pad = (width % 2, height % 2)
@@ -397,13 +406,25 @@ class Mp4Writer(Writer):
             _ffmpeg_exe(), "-y", "-hide_banner", "-nostats", "-loglevel", "error",
             "-f", "rawvideo", "-pix_fmt", "rgb24", "-s", f"{width + self._pad[0]}x{height + self._pad[1]}",
             "-framerate", _fps_arg(self.fps), "-i", "pipe:0",
-            "-map", "0:v:0",
+        ]
+        if self.single_pass:
+            cmd += ["-i", self.audio, "-map", "0:v:0", "-map", "1:a:0"]
+        else:
+            cmd += ["-map", "0:v:0"]
+        cmd += [
             # sRGB frames -> limited-range BT.709, tagged so players convert back the same way.
             "-vf", "scale=out_color_matrix=bt709:out_range=tv:flags=accurate_rnd+full_chroma_int,format=yuv420p",
             "-color_primaries", "bt709", "-color_trc", "bt709", "-colorspace", "bt709", "-color_range", "tv",
             "-c:v", "libx264", "-crf", str(self.crf), "-preset", self.preset,
         ]
-        if self.audio:
+        if self.single_pass:
+            # Pad short audio with silence, then cut both at the video's length.
+            cmd += ["-af", "apad", "-c:a", "aac", "-b:a", AAC_BITRATE,
+                    "-t", f"{self.frames / float(Fraction(self.fps)):.6f}"]
+            if self.faststart:
+                cmd += ["-movflags", "+faststart"]
+            cmd += ["-f", self.muxer, self.partial]
+        elif self.audio:
             cmd += ["-f", "mp4", self.video_path]
         else:
             if self.faststart:
@@ -442,6 +463,9 @@ class Mp4Writer(Writer):
 
     def _finish(self) -> None:
         proc = self._proc
+        if self.single_pass and self.n_frames != self.frames:
+            raise EncodeError(f"{self.n_frames} frames were written, {self.frames} were announced "
+                              f"(the audio is cut to the announced length)", path=self.out)
         try:
             proc.stdin.close()
         except OSError as exc:
@@ -449,7 +473,7 @@ class Mp4Writer(Writer):
         if proc.wait() != 0:
             raise self._failure("ffmpeg failed")
         self._proc = None
-        if self.audio:
+        if self.audio and not self.single_pass:
             self._mux()
         os.replace(self.partial, self.out)
         self._temps.remove(self.partial)
@@ -627,7 +651,7 @@ def format_for(out: PathLike) -> str:
 
 def open_writer(out: PathLike, *, fps: float, size: Tuple[int, int], format: Optional[str] = None,
                 audio: Optional[PathLike] = None, crf: int = 18, preset: str = "medium",
-                quiet: bool = False, total: Optional[int] = None) -> Writer:
+                quiet: bool = False, total: Optional[int] = None, frames: Optional[int] = None) -> Writer:
     """Open a streaming writer for ``out``.
 
     Parameters
@@ -649,6 +673,9 @@ def open_writer(out: PathLike, *, fps: float, size: Tuple[int, int], format: Opt
         Hide the progress counter.
     total : int, optional
         Expected number of frames, for the progress bar.
+    frames : int, optional
+        The exact number of frames that will be written (mp4 with audio: video and audio
+        are then encoded by one ffmpeg process; writing another number is an error).
 
     Returns
     -------
@@ -679,7 +706,7 @@ def open_writer(out: PathLike, *, fps: float, size: Tuple[int, int], format: Opt
     cls = ENCODERS.get(name)
     kwargs: Dict[str, Any] = dict(fps=fps, size=size, audio=audio, quiet=quiet, total=total)
     if cls is Mp4Writer:
-        kwargs.update(crf=crf, preset=preset)
+        kwargs.update(crf=crf, preset=preset, frames=frames)
     return cls(out, **kwargs)
 
 

@@ -1,5 +1,8 @@
 """Batch preprocessing: compute every missing pair flow of a bank into its flow store.
 
+Each entry holds both flows and their inverse maps at t = k/4 (Newton's method, see
+:func:`lipsync.flows.inverse_tables`), so rendering a frame never solves anything.
+
 Pairs are independent, so they are computed by worker processes (one pair per task; a
 worker needs only the line sets, never the images, so tasks are tiny to send). Each worker
 writes its entry itself, atomically; an interrupted run leaves only whole entries behind,

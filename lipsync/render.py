@@ -7,15 +7,14 @@ alpha = 0 shows A and alpha = 1 shows B exactly.
 Methods (registry :data:`METHODS`):
 
 ``flow`` (default)
-    Gather with ``cv2.remap``. Output pixel Y takes A at the X that moves onto it,
-    ``X + alpha F(X) = Y``, and likewise B with ``(1 - alpha)`` and the backward flow.
-    X is found by Newton's method from ``X0 = Y - alpha F(Y)`` with the flow's Jacobian
-    (precomputed once per pair). The plain fixed-point iteration ``X <- Y - alpha F(X)``
-    is cheaper per step but diverges where ``alpha |dF/dX| > 1``, which is exactly where a
-    closed mouth opens (the lips' gap expands five-fold or more). The inverse map is
-    smooth, so it is solved on a grid of every :data:`SOLVE_STEP`-th pixel and its
-    displacement upsampled bilinearly; only the image lookup runs at full resolution.
-    Only the box where the (dead-zoned, see :mod:`lipsync.store`) flows are non-zero or
+    Gather. Output pixel Y takes A at the X that moves onto it, ``X + alpha F(X) = Y``,
+    and likewise B with ``(1 - alpha)`` and the backward flow. Those inversions are
+    per-pair work, so preprocessing solves them (Newton's method,
+    :func:`lipsync.flows.inverse_tables`) at t = k / TABLE_STEPS on a coarse grid and the
+    store keeps them (:mod:`lipsync.store`). A frame interpolates the four nearest tables
+    in t with a cubic on the coarse grid, then one fused pass reads both displacements
+    bilinearly, samples both images and blends: about two image lookups and a blend per
+    pixel, whatever the subject. Only the box where the (dead-zoned) flows are non-zero or
     the images differ is rendered; the rest of the frame is the common background.
 ``splat``
     The paper's forward mapping: every pixel of A is carried to ``X + alpha F(X)``. The
@@ -32,8 +31,10 @@ Methods (registry :data:`METHODS`):
 
 from __future__ import annotations
 
+import os
+import threading
 from collections import OrderedDict
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Dict, Optional, Tuple
 
 import cv2
@@ -44,39 +45,19 @@ from .errors import InputError
 from .flows import pair_flows
 from .normalise import NormalisedBank, normalise
 from .registry import Registry
-from .store import Crop, FlowStore, StoredField
+from .store import Crop, FlowStore, InverseTables, StoredField, pack_pair, union_box, unpack_pair
 from .warp import beier_neely_map, identity_grid
 
-#: Newton steps inverting ``Y = X + alpha F(X)`` after the first-order guess. Three steps
-#: leave a residual under 0.05 px at 99.9% of pixels even where a closed mouth opens
-#: five-fold; more steps gain nothing, bilinear sampling of F limits it (measured in
-#: tests/test_render.py against 30 steps).
-FLOW_ITERATIONS = 3
-#: Anchors of the warm start: the inverse map is solved from scratch (FLOW_ITERATIONS steps)
-#: only at alpha = k / WARM_ANCHORS, once per pair and side; a frame at any other alpha
-#: starts from the nearest anchor's solution, at most 1/8 away, and needs WARM_ITERATIONS
-#: steps for the same accuracy. Anchors (not the previous frame) keep every frame a pure
-#: function of (pair, alpha), whatever order frames are asked for in.
-WARM_ANCHORS = 4
-WARM_ITERATIONS = 2
-#: Smallest Jacobian determinant a Newton step divides by. Where the warp folds over
-#: (det <= 0) there is no unique inverse; clamping keeps those rare pixels finite.
-MIN_DET = 0.05
-#: Largest Newton correction (px) per step, for the same reason.
-MAX_STEP = 4.0
-#: Extra pixels around the moving region: bilinear taps reach one pixel out.
-ROI_MARGIN = 2
-#: The inverse map is solved on every SOLVE_STEP-th pixel and upsampled: 4x less work
-#: for the Newton steps; the map is smooth, so bilinear upsampling of its displacement
-#: costs under 0.05 px on average (tests/test_render.py measures it).
-SOLVE_STEP = 2
 #: Splat holes are filled by Telea inpainting with this radius (px): holes from
 #: expansion are one or two pixels wide, so a small radius keeps edges sharp.
 INPAINT_RADIUS = 2
 #: A splatted pixel whose summed bilinear weight is below this is a hole: its colour
 #: would rest on a sliver of one source pixel.
 MIN_SPLAT_WEIGHT = 0.05
-#: Cached per-pair states (ROI-sized arrays); 9 visemes need at most 72.
+#: Fewest ROI rows per thread worth splitting a frame for (below, thread hand-off costs
+#: more than the rows: 64 rows of 512 px are ~0.3 ms of kernel).
+MIN_ROWS_PER_THREAD = 64
+#: Cached per-pair states (views of the mapped store entries); 9 visemes need at most 72.
 MAX_PAIR_STATES = 96
 
 METHODS: Registry[str] = Registry("morph method")
@@ -86,81 +67,198 @@ for _name, _why in [("flow", "interpolate the cached flows (fast, default)"),
                     ("dissolve", "cross-fade only (baseline)")]:
     METHODS.register(_name, _why, aliases=[_name.replace("-", "_")] if "-" in _name else [])
 
+# --------------------------------------------------------------------------- kernels
+#
+# One fused pass per frame (numba, compiled once and cached on disk): for every output pixel,
+# the two inverse displacements are read bilinearly off the coarse tables, both images are
+# sampled bilinearly (edge pixels repeated) and blended. No full-resolution map is ever
+# materialised: cv2.remap would need one per side (resize + convertMaps + remap: three
+# passes over 8-byte-per-pixel maps) and a fourth for the blend. On one core a whole-frame
+# flow frame costs about half the CPU of round one's per-frame Newton + cv2.remap path
+# (toon 512x512 2.2x less, drawn face 1.9x, measured side by side). nogil: frames, or row
+# bands of one frame, render in parallel threads.
+
+import numba as _nb
+
+
+@_nb.njit(cache=True, nogil=True)
+def _combine_kernel(tab, idx, wts, half, wc, scale, out):  # pragma: no cover - compiled
+    """out (hc, wc, 2) float32 = sum_n wts[n] * tab[idx[n]] / scale (idx < 0: the zero table)."""
+    hc = tab.shape[1]
+    keep = tab.shape[2]
+    inv = np.float32(1.0 / scale)
+    for i in range(hc):
+        for j in range(keep):
+            dx = np.float32(0.0)
+            dy = np.float32(0.0)
+            for n in range(4):
+                k = idx[n]
+                if k >= 0:
+                    dx += wts[n] * np.float32(tab[k, i, j, 0])
+                    dy += wts[n] * np.float32(tab[k, i, j, 1])
+            dx *= inv
+            dy *= inv
+            if half:
+                jj = wc - 1 - j
+                out[i, jj, 0] = -dx
+                out[i, jj, 1] = dy
+            out[i, j, 0] = dx
+            out[i, j, 1] = dy
+
+
+#: Packed pixels: R | G << 21 | B << 42 in one int64, so a bilinear tap is one load and one
+#: multiply for all three channels. 21-bit lanes hold 255 * 4096 (a full set of 12-bit
+#: bilinear weights) without carrying into the next lane.
+_LANE = 21
+_LANE_MASK = (1 << _LANE) - 1
+#: Sample positions are fixed-point in 1/64 px (cv2.remap uses 1/32); bilinear weights are
+#: products of two 6-bit fractions, summing to exactly 4096.
+_SUBPIXEL = 64
+#: The blend weight alpha in 1/4096 steps (cannot be seen: at most 1/16 of a grey level).
+_BLEND_ONE = 4096
+
+
+def pack_pixels(image: np.ndarray) -> np.ndarray:
+    """RGB ``uint8`` ``(H, W, 3)`` -> int64 ``(H, W)``: R | G << 21 | B << 42 (the kernel's input).
+
+    Examples
+    --------
+    >>> int(pack_pixels(np.array([[[1, 2, 3]]], np.uint8))[0, 0]) == 1 + (2 << 21) + (3 << 42)
+    True
+    """
+    p = image[..., 0].astype(np.int64)
+    p |= image[..., 1].astype(np.int64) << _LANE
+    p |= image[..., 2].astype(np.int64) << (2 * _LANE)
+    return p
+
+
+@_nb.njit(cache=True, nogil=True, fastmath=True, boundscheck=False)
+def _warp_blend_kernel(pa, pb, da, db, by0, bx0, bh, bw, step, ry0, ry1, rx0, rx1, ka, out,
+                       rowbuf, rowfull):  # pragma: no cover - compiled
+    """Frame pixels [ry0, ry1) x [rx0, rx1): (1-alpha) A(Y + da(Y)) + alpha B(Y + db(Y)).
+
+    pa, pb: packed images (:func:`pack_pixels`); da, db: coarse displacements over the box
+    (by0, bx0, bh, bw) with spacing ``step``, zero outside it; ka = (1 - alpha) in
+    1/4096. Per output row the coarse rows are interpolated once into ``rowfull`` (4
+    floats per pixel), so the pixel loop is only two fixed-point bilinear samples of packed
+    pixels and the blend. Edge pixels are repeated (positions are clamped to the image).
+    """
+    H = pa.shape[0]
+    W = pa.shape[1]
+    hc = da.shape[0]
+    wc = da.shape[1]
+    kb = 4096 - ka
+    xmax = (W - 1) * 64
+    ymax = (H - 1) * 64
+    inv = np.float32(1.0 / step)
+    m = np.int64(2097151)
+    rw = rx1 - rx0
+    rowfull[:rw, :] = 0.0
+    for y in range(ry0, ry1):
+        yl = y - by0
+        if hc > 0 and yl >= 0 and yl < bh:
+            cy = (np.float32(yl) + np.float32(0.5)) * inv - np.float32(0.5)
+            cy = min(max(cy, np.float32(0.0)), np.float32(hc - 1))
+            i0 = int(cy)
+            fy = cy - np.float32(i0)
+            i1 = np.uint64(min(i0 + 1, hc - 1))
+            i0 = np.uint64(i0)
+            for j in range(wc):
+                for c in range(2):
+                    rowbuf[j, c] = da[i0, j, c] + fy * (da[i1, j, c] - da[i0, j, c])
+                    rowbuf[j, 2 + c] = db[i0, j, c] + fy * (db[i1, j, c] - db[i0, j, c])
+            for xl in range(bw):
+                cx = (np.float32(xl) + np.float32(0.5)) * inv - np.float32(0.5)
+                cx = min(max(cx, np.float32(0.0)), np.float32(wc - 1))
+                j0 = int(cx)
+                fx = cx - np.float32(j0)
+                j1 = np.uint64(min(j0 + 1, wc - 1))
+                j0 = np.uint64(j0)
+                o = np.uint64(xl + bx0 - rx0)
+                for c in range(4):
+                    rowfull[o, c] = rowbuf[j0, c] + fx * (rowbuf[j1, c] - rowbuf[j0, c])
+        else:
+            rowfull[:rw, :] = 0.0
+        fyy = np.float32(y)
+        for o in range(rw):
+            x = rx0 + o
+            fxx = np.float32(x)
+            sx = min(max(int((fxx + rowfull[o, 0]) * np.float32(64.0) + np.float32(0.5)), 0), xmax)
+            sy = min(max(int((fyy + rowfull[o, 1]) * np.float32(64.0) + np.float32(0.5)), 0), ymax)
+            x0 = sx >> 6
+            y0 = sy >> 6
+            ux = sx & 63
+            uy = sy & 63
+            x1 = np.uint64(min(x0 + 1, W - 1))  # unsigned indices: numba then skips its
+            y1 = np.uint64(min(y0 + 1, H - 1))  # negative-index wraparound (~15% of the loop)
+            x0 = np.uint64(x0)
+            y0 = np.uint64(y0)
+            acc_a = (pa[y0, x0] * ((64 - ux) * (64 - uy)) + pa[y0, x1] * (ux * (64 - uy))
+                     + pa[y1, x0] * ((64 - ux) * uy) + pa[y1, x1] * (ux * uy))
+            sx = min(max(int((fxx + rowfull[o, 2]) * np.float32(64.0) + np.float32(0.5)), 0), xmax)
+            sy = min(max(int((fyy + rowfull[o, 3]) * np.float32(64.0) + np.float32(0.5)), 0), ymax)
+            x0 = sx >> 6
+            y0 = sy >> 6
+            ux = sx & 63
+            uy = sy & 63
+            x1 = np.uint64(min(x0 + 1, W - 1))  # unsigned indices: numba then skips its
+            y1 = np.uint64(min(y0 + 1, H - 1))  # negative-index wraparound (~15% of the loop)
+            x0 = np.uint64(x0)
+            y0 = np.uint64(y0)
+            acc_b = (pb[y0, x0] * ((64 - ux) * (64 - uy)) + pb[y0, x1] * (ux * (64 - uy))
+                     + pb[y1, x0] * ((64 - ux) * uy) + pb[y1, x1] * (ux * uy))
+            # blend in 1/4096 and round: (wa * acc_a + wb * acc_b) / 4096^2 per lane
+            out[y, x, 0] = ((acc_a & m) * ka + (acc_b & m) * kb + 8388608) >> 24
+            out[y, x, 1] = (((acc_a >> 21) & m) * ka + ((acc_b >> 21) & m) * kb + 8388608) >> 24
+            out[y, x, 2] = (((acc_a >> 42) & m) * ka + ((acc_b >> 42) & m) * kb + 8388608) >> 24
+
+
+def table_weights(t: float, steps: int) -> Tuple[np.ndarray, np.ndarray]:
+    """Cubic (Lagrange) weights of the tables nearest ``t``: ``(indices, weights)``, 4 each.
+
+    Nodes are ``t = n / steps`` for n = 0..steps; node 0 (the identity) is index -1, node n
+    is table ``n - 1``. At a node the weights are exactly one-hot, so t = 0 gives the image.
+
+    Examples
+    --------
+    >>> idx, w = table_weights(0.5, 4)
+    >>> idx.tolist(), [abs(float(v)) for v in w]
+    ([0, 1, 2, 3], [0.0, 1.0, 0.0, 0.0])
+    """
+    x = float(t) * steps
+    n_nodes = min(4, steps + 1)
+    j0 = min(max(int(np.floor(x)) - 1, 0), steps + 1 - n_nodes)
+    nodes = list(range(j0, j0 + n_nodes))
+    idx = np.full(4, -1, np.int64)
+    wts = np.zeros(4, np.float32)
+    for slot, n in enumerate(nodes):
+        w = 1.0
+        for m in nodes:
+            if m != n:
+                w *= (x - m) / (n - m)
+        idx[slot] = n - 1
+        wts[slot] = w
+    return idx, wts
+
 
 @dataclass
 class _Pair:
-    """Everything a frame of the ordered pair (a, b) needs, allocated once."""
+    """Everything a frame of the ordered pair (a, b) needs: read-only, shared by threads."""
 
     a: str
     b: str
-    roi: Crop
-    img_a: np.ndarray          # ROI views of the normalised images
-    img_b: np.ndarray
-    fwd: np.ndarray            # float32 (h, w, 2) flows inside the ROI
-    bwd: np.ndarray
-    jac_f: np.ndarray          # float32 (h, w, 4) Jacobians d(flow)/d(x, y): xx, xy, yx, yy
-    jac_b: np.ndarray
-    grid: np.ndarray           # ROI-relative identity grid (full resolution)
-    coarse: np.ndarray         # the coarse solve grid, in full-resolution coordinates
-    map_a: np.ndarray          # full-resolution maps handed to cv2.remap
-    map_b: np.ndarray
-    work: "_NewtonBuffers"
-    buf_a: np.ndarray
-    buf_b: np.ndarray
-    anchors: Dict[Tuple[str, int], np.ndarray] = field(default_factory=dict)  # (side, k) -> coarse X
-
-
-@dataclass
-class _NewtonBuffers:
-    """Per-pair scratch planes for the Newton inversion (allocated once)."""
-
-    m: np.ndarray     # (h, w, 2) current estimate of X on the coarse grid
-    fixed_xy: np.ndarray   # (H, W, 2) int16 and (H, W) uint16: cv2.convertMaps' fixed-point map
-    fixed_frac: np.ndarray
-    sampled: np.ndarray  # (h, w, 2) flow sampled at X
-    disp: np.ndarray  # (H, W, 2) upsampled displacement X - Y at full resolution
-    jac: np.ndarray   # (h, w, 4) Jacobian sampled at X
-    rx: np.ndarray
-    ry: np.ndarray
-    a: np.ndarray
-    b: np.ndarray
-    c: np.ndarray
-    d: np.ndarray
-    det: np.ndarray
-    t1: np.ndarray
-
-    @classmethod
-    def allocate(cls, h: int, w: int, full: Tuple[int, int]) -> "_NewtonBuffers":
-        planes = [np.empty((h, w), np.float32) for _ in range(8)]
-        return cls(np.empty((h, w, 2), np.float32), np.empty(full + (2,), np.int16), np.empty(full, np.uint16),
-                   np.empty((h, w, 2), np.float32), np.empty(full + (2,), np.float32),
-                   np.empty((h, w, 4), np.float32), *planes)
-
-
-def _jacobian(flow: np.ndarray) -> np.ndarray:
-    """d(flow)/d(x, y) by central differences, as (h, w, 4): dFx/dx, dFx/dy, dFy/dx, dFy/dy."""
-    jac = np.empty(flow.shape[:2] + (4,), np.float32)
-    for c in range(2):
-        if flow.shape[0] > 1 and flow.shape[1] > 1:
-            gy, gx = np.gradient(flow[..., c])
-        else:
-            gy = gx = np.zeros(flow.shape[:2], np.float32)
-        jac[..., 2 * c] = gx
-        jac[..., 2 * c + 1] = gy
-    return jac
-
-
-def _union(boxes, shape, margin) -> Crop:
-    boxes = [b for b in boxes if not b.empty]
-    if not boxes:
-        return Crop(0, 0, 0, 0)
-    h, w = shape
-    return Crop(max(0, min(b.y0 for b in boxes) - margin), min(h, max(b.y1 for b in boxes) + margin),
-                max(0, min(b.x0 for b in boxes) - margin), min(w, max(b.x1 for b in boxes) + margin))
+    roi: Crop                  # rendered region: the tables' box and where the images differ
+    box: Crop                  # where the tables say anything moves
+    inv_a: InverseTables       # X - Y for the first image (t = alpha)
+    inv_b: InverseTables       # ... and the second (t = 1 - alpha)
+    fwd_field: StoredField     # the flows themselves, only for splat
+    bwd_field: StoredField
+    splat_state: Optional[tuple] = None  # (fwd, bwd, grid) over the ROI, made on first splat
 
 
 def _difference_box(a: np.ndarray, b: np.ndarray) -> Crop:
-    diff = np.any(a != b, axis=2)
+    """Box of the pixels where ``a`` and ``b`` differ (packed ``(H, W)`` or ``(H, W, 3)`` images)."""
+    diff = a != b if a.ndim == 2 else np.any(a != b, axis=2)
     rows = np.flatnonzero(diff.any(axis=1))
     if rows.size == 0:
         return Crop(0, 0, 0, 0)
@@ -168,8 +266,27 @@ def _difference_box(a: np.ndarray, b: np.ndarray) -> Crop:
     return Crop(int(rows[0]), int(rows[-1]) + 1, int(cols[0]), int(cols[-1]) + 1)
 
 
+def _copy_outside(dst: np.ndarray, src: np.ndarray, r: Crop) -> None:
+    """dst = src outside the box r (the four strips around it)."""
+    h, w = dst.shape[:2]
+    if r.empty:
+        np.copyto(dst, src)
+        return
+    if r.y0 > 0:
+        dst[:r.y0] = src[:r.y0]
+    if r.y1 < h:
+        dst[r.y1:] = src[r.y1:]
+    if r.x0 > 0:
+        dst[r.y0:r.y1, :r.x0] = src[r.y0:r.y1, :r.x0]
+    if r.x1 < w:
+        dst[r.y0:r.y1, r.x1:] = src[r.y0:r.y1, r.x1:]
+
+
 class Renderer:
     """Renders in-between frames of a bank, reusing buffers and flows across frames.
+
+    ``render(..., out=buffer)`` may be called from several threads at once (the frame
+    kernels release the GIL): pair states are read-only and scratch is per thread.
 
     Parameters
     ----------
@@ -201,6 +318,14 @@ class Renderer:
         self._frame = np.empty((h, w, 3), np.uint8)
         self._frame_pair: Optional[Tuple[str, str]] = None
         self._pairs: "OrderedDict[Tuple[str, str], _Pair]" = OrderedDict()
+        self._lock = threading.Lock()
+        self._local = threading.local()
+        self._packed_images: Dict[str, np.ndarray] = {}
+        #: Threads one flow frame is split across. All cores by default (a single frame,
+        #: e.g. live playback, comes back sooner); 1 when frames themselves are rendered in
+        #: parallel (lipsync render) or when measuring one core.
+        self.frame_threads = max(1, os.cpu_count() or 1)
+        self._pool = None
         self._full_a = np.empty((h, w, 3), np.uint8)
         self._full_b = np.empty((h, w, 3), np.uint8)
 
@@ -217,35 +342,39 @@ class Renderer:
         imgs = self.nb.images
         if from_viseme == to_viseme or alpha <= 0.0:
             np.copyto(frame, imgs[from_viseme])
-            self._frame_pair = None
+            if out is None:
+                self._frame_pair = None
             return frame
         if alpha >= 1.0:
             np.copyto(frame, imgs[to_viseme])
-            self._frame_pair = None
+            if out is None:
+                self._frame_pair = None
             return frame
         if self.method == "dissolve":
             cv2.addWeighted(imgs[from_viseme], 1.0 - alpha, imgs[to_viseme], alpha, 0.0, dst=frame)
-            self._frame_pair = None
+            if out is None:
+                self._frame_pair = None
             return frame
         if self.method == "beier-neely":
             wa, wb = self._beier_neely_parts(from_viseme, to_viseme, alpha)
             cv2.addWeighted(wa, 1.0 - alpha, wb, alpha, 0.0, dst=frame)
-            self._frame_pair = None
+            if out is None:
+                self._frame_pair = None
             return frame
         pair = self._pair(from_viseme, to_viseme)
-        if out is not None or self._frame_pair != (from_viseme, to_viseme):
-            # Outside the ROI both images are equal and nothing moves.
-            np.copyto(frame, imgs[from_viseme])
-            if out is None:
-                self._frame_pair = (from_viseme, to_viseme)
-        if pair.roi.empty:
+        r = pair.roi
+        if out is not None:
+            _copy_outside(frame, imgs[from_viseme], r)  # outside the ROI both images are equal
+        elif self._frame_pair != (from_viseme, to_viseme):
+            _copy_outside(frame, imgs[from_viseme], r)
+            self._frame_pair = (from_viseme, to_viseme)
+        if r.empty:
             return frame
         if self.method == "flow":
-            self._flow_parts(pair, alpha)
+            self._flow_frame(pair, alpha, frame)
         else:
-            self._splat_parts(pair, alpha)
-        r = pair.roi
-        cv2.addWeighted(pair.buf_a, 1.0 - alpha, pair.buf_b, alpha, 0.0, dst=frame[r.y0:r.y1, r.x0:r.x1])
+            buf_a, buf_b = self._splat_parts(pair, alpha)
+            cv2.addWeighted(buf_a, 1.0 - alpha, buf_b, alpha, 0.0, dst=frame[r.y0:r.y1, r.x0:r.x1])
         return frame
 
     def parts(self, from_viseme: str, to_viseme: str, alpha: float) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -263,13 +392,29 @@ class Renderer:
         else:
             pair = self._pair(from_viseme, to_viseme)
             wa, wb = a.copy(), b.copy()
-            if not pair.roi.empty:
-                (self._flow_parts if self.method == "flow" else self._splat_parts)(pair, alpha)
-                r = pair.roi
-                wa[r.y0:r.y1, r.x0:r.x1] = pair.buf_a
-                wb[r.y0:r.y1, r.x0:r.x1] = pair.buf_b
+            r = pair.roi
+            if not r.empty:
+                if self.method == "flow":
+                    self._flow_frame(pair, alpha, wa, wb)
+                else:
+                    buf_a, buf_b = self._splat_parts(pair, alpha)
+                    wa[r.y0:r.y1, r.x0:r.x1] = buf_a
+                    wb[r.y0:r.y1, r.x0:r.x1] = buf_b
         blend = cv2.addWeighted(wa, 1.0 - alpha, wb, alpha, 0.0)
         return wa, wb, blend
+
+    def inverse_map(self, from_viseme: str, to_viseme: str, t: float, side: str = "a") -> np.ndarray:
+        """The coarse inverse displacement ``X - Y`` a frame uses, float32 ``(hc, wc, 2)``.
+
+        ``side`` "a" is the first image at ``t = alpha``, "b" the second at
+        ``t = 1 - alpha``; the grid is :func:`lipsync.flows.coarse_points` of the pair's box
+        (``self._pair(a, b).box``). For tests and figures.
+        """
+        pair = self._pair(from_viseme, to_viseme)
+        inv = pair.inv_a if side == "a" else pair.inv_b
+        out = np.zeros((inv.data.shape[1], inv.coarse_width, 2), np.float32)
+        _fill_coarse(inv, t, out)
+        return out
 
     # ------------------------------------------------------------------ checks
     def _check(self, a: str, b: str, alpha: float) -> None:
@@ -295,127 +440,97 @@ class Renderer:
             self.store.put_pair(key, fwd, bwd, axis=nb.axis, names=(first, second))
             got = self.store.load_pair(key, self.shape)
         except OSError:
-            got = None  # unwritable store: use the fields directly
+            got = None  # unwritable store: the same entry, kept in memory
         if got is None:
-            full = Crop(0, self.shape[0], 0, self.shape[1])
-            got = (StoredField(self.shape, full, fwd), StoredField(self.shape, full, bwd))
+            meta, arrays = pack_pair(fwd, bwd, axis=nb.axis)
+            got = unpack_pair(meta, arrays, self.shape)
         return got if (first, second) == (a, b) else (got[1], got[0])
 
     def _pair(self, a: str, b: str) -> _Pair:
         key = (a, b)
-        pair = self._pairs.get(key)
-        if pair is not None:
-            self._pairs.move_to_end(key)
+        with self._lock:
+            pair = self._pairs.get(key)
+            if pair is not None:
+                self._pairs.move_to_end(key)
+                return pair
+            fwd, bwd = self._flows(a, b)
+            box = fwd.inverse.box
+            roi = union_box([box, _difference_box(self._packed(a), self._packed(b))], self.shape, 0)
+            pair = _Pair(a=a, b=b, roi=roi, box=box, inv_a=fwd.inverse, inv_b=bwd.inverse,
+                         fwd_field=fwd, bwd_field=bwd)
+            self._pairs[key] = pair
+            if len(self._pairs) > MAX_PAIR_STATES:
+                self._pairs.popitem(last=False)
             return pair
-        fwd, bwd = self._flows(a, b)
-        ia, ib = self.nb.images[a], self.nb.images[b]
-        roi = _union([fwd.crop, bwd.crop, _difference_box(ia, ib)], self.shape, ROI_MARGIN)
-        h, w = roi.y1 - roi.y0, roi.x1 - roi.x0
-        sl = (slice(roi.y0, roi.y1), slice(roi.x0, roi.x1))
-        fwd_full = np.ascontiguousarray(fwd.full()[sl])
-        bwd_full = np.ascontiguousarray(bwd.full()[sl])
-        hc, wc = -(-h // SOLVE_STEP), -(-w // SOLVE_STEP)
-        # Coarse point (i, j) sits at the centre of the fine block it covers, which is where
-        # cv2.resize puts it when upsampling by SOLVE_STEP.
-        coarse = identity_grid((hc, wc)) * SOLVE_STEP + (SOLVE_STEP - 1) / 2.0
-        pair = _Pair(a=a, b=b, roi=roi, img_a=ia[sl], img_b=ib[sl], fwd=fwd_full, bwd=bwd_full,
-                     jac_f=_jacobian(fwd_full), jac_b=_jacobian(bwd_full),
-                     grid=identity_grid((h, w)), coarse=coarse.astype(np.float32),
-                     map_a=np.empty((h, w, 2), np.float32), map_b=np.empty((h, w, 2), np.float32),
-                     work=_NewtonBuffers.allocate(hc, wc, (h, w)),
-                     buf_a=np.empty((h, w, 3), np.uint8), buf_b=np.empty((h, w, 3), np.uint8))
-        self._pairs[key] = pair
-        if len(self._pairs) > MAX_PAIR_STATES:
-            self._pairs.popitem(last=False)
-        return pair
+
+    def _scratch(self, hc: int, wc: int):
+        """Per-thread planes (coarse displacement per side, row buffers), reused across frames."""
+        cache = getattr(self._local, "coarse", None)
+        if cache is None or cache[0].shape[:2] != (hc, wc):
+            cache = (np.zeros((hc, wc, 2), np.float32), np.zeros((hc, wc, 2), np.float32),
+                     np.zeros((max(wc, 1), 4), np.float32), np.zeros((self.shape[1], 4), np.float32))
+            self._local.coarse = cache
+        return cache
 
     # ------------------------------------------------------------------ methods
-    @staticmethod
-    def _invert(flow: np.ndarray, jac: np.ndarray, t: float, grid: np.ndarray, m: np.ndarray,
-                sampled: np.ndarray, wk: _NewtonBuffers) -> None:
-        """Write into ``m`` the X with ``X + t*flow(X) = grid`` (Newton's method).
-
-        ``grid`` holds the target points Y (any positions, in the flow's pixel coordinates);
-        ``m`` and ``sampled`` have its shape.
-        """
-        cv2.remap(flow, grid, None, cv2.INTER_LINEAR, dst=sampled, borderMode=cv2.BORDER_REPLICATE)
-        cv2.addWeighted(sampled, -t, grid, 1.0, 0.0, dst=m)  # first-order guess Y - t F(Y)
-        Renderer._newton(flow, jac, t, grid, m, sampled, wk, FLOW_ITERATIONS)
-
-    @staticmethod
-    def _newton(flow: np.ndarray, jac: np.ndarray, t: float, grid: np.ndarray, m: np.ndarray,
-                sampled: np.ndarray, wk: _NewtonBuffers, iterations: int) -> None:
-        """Refine ``m`` toward ``X + t*flow(X) = grid`` by ``iterations`` Newton steps."""
-        mx, my = m[..., 0], m[..., 1]
-        for _ in range(iterations):
-            cv2.remap(flow, m, None, cv2.INTER_LINEAR, dst=sampled, borderMode=cv2.BORDER_REPLICATE)
-            cv2.remap(jac, m, None, cv2.INTER_LINEAR, dst=wk.jac, borderMode=cv2.BORDER_REPLICATE)
-            # residual r = X + t F(X) - Y
-            cv2.addWeighted(sampled, t, m, 1.0, 0.0, dst=sampled)
-            np.subtract(sampled[..., 0], grid[..., 0], out=wk.rx)
-            np.subtract(sampled[..., 1], grid[..., 1], out=wk.ry)
-            # M = I + t J(X) = [[a, b], [c, d]]; step = M^-1 r
-            np.multiply(wk.jac[..., 0], t, out=wk.a)
-            wk.a += 1.0
-            np.multiply(wk.jac[..., 1], t, out=wk.b)
-            np.multiply(wk.jac[..., 2], t, out=wk.c)
-            np.multiply(wk.jac[..., 3], t, out=wk.d)
-            wk.d += 1.0
-            np.multiply(wk.a, wk.d, out=wk.det)
-            np.multiply(wk.b, wk.c, out=wk.t1)
-            wk.det -= wk.t1
-            np.maximum(wk.det, MIN_DET, out=wk.det)
-            # dx = (d rx - b ry) / det ; dy = (a ry - c rx) / det
-            np.multiply(wk.d, wk.rx, out=wk.t1)
-            wk.b *= wk.ry
-            wk.t1 -= wk.b
-            wk.t1 /= wk.det
-            np.clip(wk.t1, -MAX_STEP, MAX_STEP, out=wk.t1)
-            wk.a *= wk.ry
-            wk.c *= wk.rx
-            wk.a -= wk.c
-            wk.a /= wk.det
-            np.clip(wk.a, -MAX_STEP, MAX_STEP, out=wk.a)
-            mx -= wk.t1
-            my -= wk.a
-
-    def _solve_coarse(self, p: _Pair, side: str, flow: np.ndarray, jac: np.ndarray, t: float) -> None:
-        """Leave in ``p.work.m`` the coarse-grid X with ``X + t*flow(X) = Y`` (warm-started)."""
-        wk = p.work
-        k = int(round(t * WARM_ANCHORS))
-        if k == 0:  # near alpha 0 the first-order guess is as good as an anchor
-            self._invert(flow, jac, t, p.coarse, wk.m, wk.sampled, wk)
+    def _flow_frame(self, p: _Pair, alpha: float, out: np.ndarray, out_b: Optional[np.ndarray] = None) -> None:
+        """Write the ROI of the frame (or, with ``out_b``, of both warped images) into ``out``."""
+        ia, ib = p.inv_a, p.inv_b
+        hc = ia.data.shape[1]
+        da, db, rowbuf, rowfull = self._scratch(hc, ia.coarse_width)
+        if hc:
+            _fill_coarse(ia, alpha, da)
+            _fill_coarse(ib, 1.0 - alpha, db)
+        pa, pb = self._packed(p.a), self._packed(p.b)
+        bx, r = p.box, p.roi
+        box = (bx.y0, bx.x0, bx.y1 - bx.y0, bx.x1 - bx.x0, ia.step)
+        jobs = [(int(round((1.0 - alpha) * _BLEND_ONE)), out)] if out_b is None else \
+            [(_BLEND_ONE, out), (0, out_b)]  # the two warped images alone: all weight on one side
+        n = self.frame_threads if (r.y1 - r.y0) >= MIN_ROWS_PER_THREAD * 2 else 1
+        if n <= 1:
+            for ka, dst in jobs:
+                _warp_blend_kernel(pa, pb, da, db, *box, r.y0, r.y1, r.x0, r.x1, ka, dst, rowbuf, rowfull)
             return
-        anchor = p.anchors.get((side, k))
-        if anchor is None:
-            self._invert(flow, jac, k / WARM_ANCHORS, p.coarse, wk.m, wk.sampled, wk)
-            anchor = p.anchors[(side, k)] = wk.m.copy()
-        np.copyto(wk.m, anchor)
-        if t != k / WARM_ANCHORS:
-            self._newton(flow, jac, t, p.coarse, wk.m, wk.sampled, wk, WARM_ITERATIONS)
+        # One frame on several threads (the kernel releases the GIL): bands of rows, each
+        # thread with its own row buffers; the coarse planes are shared, read-only.
+        edges = np.linspace(r.y0, r.y1, n + 1).astype(int)
 
-    def _gather(self, p: _Pair, side: str, image: np.ndarray, flow: np.ndarray, jac: np.ndarray, t: float,
-                m: np.ndarray, out: np.ndarray) -> None:
-        """``out[Y] = image[X]`` with ``X + t*flow(X) = Y``, X solved on the coarse grid."""
-        wk = p.work
-        self._solve_coarse(p, side, flow, jac, t)
-        # Upsample the displacement X - Y (not X itself): it vanishes at the ROI's edge, so
-        # the edge clamping of cv2.resize costs nothing there.
-        wk.m -= p.coarse
-        h, w = m.shape[:2]
-        cv2.resize(wk.m, (w, h), dst=wk.disp, interpolation=cv2.INTER_LINEAR)
-        np.add(p.grid, wk.disp, out=m)
-        # Fixed-point maps remap ~1.7x faster than float maps; 1/32 px resolution is plenty.
-        m1, m2 = cv2.convertMaps(m, None, cv2.CV_16SC2, dstmap1=wk.fixed_xy, dstmap2=wk.fixed_frac)
-        cv2.remap(image, m1, m2, cv2.INTER_LINEAR, dst=out, borderMode=cv2.BORDER_REPLICATE)
+        def band(i):
+            _, _, rb, rf = self._scratch(hc, ia.coarse_width)
+            for ka, dst in jobs:
+                _warp_blend_kernel(pa, pb, da, db, *box, edges[i], edges[i + 1], r.x0, r.x1, ka, dst, rb, rf)
 
-    def _flow_parts(self, p: _Pair, alpha: float) -> None:
-        self._gather(p, "a", p.img_a, p.fwd, p.jac_f, alpha, p.map_a, p.buf_a)
-        self._gather(p, "b", p.img_b, p.bwd, p.jac_b, 1.0 - alpha, p.map_b, p.buf_b)
+        for f in [self._band_pool().submit(band, i) for i in range(n)]:
+            f.result()
 
-    def _splat_parts(self, p: _Pair, alpha: float) -> None:
-        _splat(p.img_a, p.fwd, alpha, p.grid, p.buf_a)
-        _splat(p.img_b, p.bwd, 1.0 - alpha, p.grid, p.buf_b)
+    def _band_pool(self):
+        with self._lock:
+            if self._pool is None:
+                from concurrent.futures import ThreadPoolExecutor
+
+                self._pool = ThreadPoolExecutor(self.frame_threads, thread_name_prefix="lipsync-band")
+            return self._pool
+
+    def _packed(self, v: str) -> np.ndarray:
+        got = self._packed_images.get(v)
+        if got is None:
+            got = self._packed_images[v] = pack_pixels(self.nb.images[v])
+        return got
+
+    def _splat_parts(self, p: _Pair, alpha: float) -> Tuple[np.ndarray, np.ndarray]:
+        r = p.roi
+        if p.splat_state is None:
+            sl = (slice(r.y0, r.y1), slice(r.x0, r.x1))
+            p.splat_state = (np.ascontiguousarray(p.fwd_field.full()[sl]),
+                             np.ascontiguousarray(p.bwd_field.full()[sl]),
+                             identity_grid((r.y1 - r.y0, r.x1 - r.x0)))
+        fwd, bwd, grid = p.splat_state
+        imgs = self.nb.images
+        buf_a = np.empty(grid.shape[:2] + (3,), np.uint8)
+        buf_b = np.empty_like(buf_a)
+        _splat(imgs[p.a][r.y0:r.y1, r.x0:r.x1], fwd, alpha, grid, buf_a)
+        _splat(imgs[p.b][r.y0:r.y1, r.x0:r.x1], bwd, 1.0 - alpha, grid, buf_b)
+        return buf_a, buf_b
 
     def _beier_neely_parts(self, a: str, b: str, alpha: float) -> Tuple[np.ndarray, np.ndarray]:
         nb, w = self.nb, self.bank.warp
@@ -424,6 +539,11 @@ class Renderer:
             m = beier_neely_map(self.shape, dst_lines=lines, src_lines=nb.lines[src], a=w.a, b=w.b, p=w.p)
             cv2.remap(nb.images[src], m, None, cv2.INTER_LINEAR, dst=out, borderMode=cv2.BORDER_REPLICATE)
         return self._full_a, self._full_b
+
+
+def _fill_coarse(inv: InverseTables, t: float, out: np.ndarray) -> None:
+    idx, wts = table_weights(t, inv.steps)
+    _combine_kernel(inv.data, idx, wts, inv.half, inv.coarse_width, float(inv.scale), out)
 
 
 def _canonical(method: str) -> str:

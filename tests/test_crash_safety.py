@@ -65,7 +65,7 @@ def snapshot(store: Path) -> Dict[str, bytes]:
 
 
 def entry_names(snap: Dict[str, bytes]) -> List[str]:
-    return [n for n in snap if n.endswith(".npz")]
+    return [n for n in snap if n.endswith((".npz", ".flow"))]
 
 
 @pytest.fixture(scope="module")
@@ -136,7 +136,7 @@ def test_sigkill_at_random_moments_then_rerun_gives_the_clean_store(bank, refere
             time.sleep(when)
         else:
             deadline = time.monotonic() + RUN_TIMEOUT_S
-            while len(list((store / "flows").glob("*.npz"))) < when and proc.poll() is None:
+            while len(list((store / "flows").glob("*.flow"))) < when and proc.poll() is None:
                 assert time.monotonic() < deadline
                 time.sleep(POLL_S)
         kill_group(proc)
@@ -163,7 +163,7 @@ def test_killed_twice_in_a_row_then_rerun(bank, reference, tmp_path):
     store = tmp_path / "store"
     for k in (4, 12):  # the second run resumes from the first one's entries and is killed too
         proc = start(bank, store)
-        while len(list((store / "flows").glob("*.npz"))) < k and proc.poll() is None:
+        while len(list((store / "flows").glob("*.flow"))) < k and proc.poll() is None:
             time.sleep(POLL_S)
         kill_group(proc)
     run_to_completion(bank, store)
@@ -220,21 +220,41 @@ DAMAGE = {
 }
 
 
+def _flat_header_len(d: bytes) -> int:
+    return int.from_bytes(d[12:16], "little")
+
+
+# Flow entries are flat files (magic, CRC-32, header length, JSON header, arrays).
+FLAT_DAMAGE = {
+    "flip-magic": lambda d, other: _flip(d, 0),
+    "flip-crc": lambda d, other: _flip(d, 9),
+    "flip-header-length": lambda d, other: _flip(d, 12),
+    "flip-json-header": lambda d, other: _flip(d, 16 + _flat_header_len(d) // 2),
+    "flip-payload": lambda d, other: _flip(d, len(d) // 2),
+    "flip-last-table-byte": lambda d, other: _flip(d, len(d) - 1),
+    "cut-last-byte": lambda d, other: d[:-1],
+    "cut-half": lambda d, other: d[: len(d) // 2],
+    "append-byte": lambda d, other: d + b"\0",
+    "empty": lambda d, other: b"",
+    "another-entry": lambda d, other: other,
+}
+
+
 def test_damaged_entries_are_detected_and_recomputed(bank, reference, tmp_path):
     """Every kind of damage at once, each to its own flow entry and its own image entry; one
-    run must find all 18, say so for each, recompute them and end with the clean store."""
+    run must find all of them, say so for each, recompute them and end with the clean store."""
     ref, _ = reference
     store = tmp_path / "store"
     for name, data in ref.items():
         (store / name).parent.mkdir(parents=True, exist_ok=True)
         (store / name).write_bytes(data)
     victims = {}
-    for kind in ("flows", "images"):
+    for kind, table in (("flows", FLAT_DAMAGE), ("images", DAMAGE)):
         names = [n for n in entry_names(ref) if n.startswith(kind + "/")]
-        assert len(names) >= len(DAMAGE)
-        for i, damage in enumerate(sorted(DAMAGE)):
+        assert len(names) >= len(table)
+        for i, damage in enumerate(sorted(table)):
             victim, other = names[i], names[(i + 1) % len(names)]
-            (store / victim).write_bytes(DAMAGE[damage](ref[victim], ref[other]))
+            (store / victim).write_bytes(table[damage](ref[victim], ref[other]))
             assert (store / victim).read_bytes() != ref[victim]
             victims[victim] = damage
     result = run_to_completion(bank, store)
@@ -242,5 +262,6 @@ def test_damaged_entries_are_detected_and_recomputed(bank, reference, tmp_path):
     for victim, damage in victims.items():
         assert any(Path(victim).name in line for line in warned), f"{damage} on {victim} went unnoticed"
     assert len(warned) == len(victims)
-    assert f"36 pairs: {len(DAMAGE)} computed, {36 - len(DAMAGE)} reused" in result.stdout, result.stdout
+    n = len(FLAT_DAMAGE)
+    assert f"36 pairs: {n} computed, {36 - n} reused" in result.stdout, result.stdout
     assert snapshot(store) == ref

@@ -165,13 +165,14 @@ def test_other_containers(tmp_path):
 
 # -- audio -----------------------------------------------------------------------------------
 
+@pytest.mark.parametrize("announced", [False, True], ids=["two-pass", "one-process"])
 @pytest.mark.parametrize("audio_seconds", [0.52, 1.73])
-def test_audio_is_aac_and_matches_video_duration(tmp_path, audio_seconds):
+def test_audio_is_aac_and_matches_video_duration(tmp_path, audio_seconds, announced):
     n = 25  # exactly 1 s of video: shorter than one wav, longer than the other
     wav = write_wav(tmp_path / "speech.wav", audio_seconds)
     out = tmp_path / "talk.mp4"
     _, frames = colour_frames(n)
-    with open_writer(out, fps=FPS, size=(W, H), audio=wav, quiet=True) as w:
+    with open_writer(out, fps=FPS, size=(W, H), audio=wav, quiet=True, frames=n if announced else None) as w:
         for f in frames:
             w.write(f)
     info = probe(out)
@@ -190,18 +191,40 @@ def test_audio_is_aac_and_matches_video_duration(tmp_path, audio_seconds):
     assert leftovers(tmp_path, "speech.wav", "talk.mp4") == []
 
 
-def test_audio_starts_at_the_first_frame(tmp_path):
+@pytest.mark.parametrize("announced", [False, True], ids=["two-pass", "one-process"])
+def test_audio_starts_at_the_first_frame(tmp_path, announced):
     # 0.4 s of silence then a tone: the onset must land at 0.4 s in the output (no AAC
     # priming delay, no offset), i.e. the first video frame is t = 0 of the audio.
     wav = write_wav(tmp_path / "onset.wav", 1.2, silence_before=0.4, rate=48000)
     out = tmp_path / "onset.mp4"
     _, frames = colour_frames(30)
-    with open_writer(out, fps=FPS, size=(W, H), audio=wav, quiet=True) as w:
+    with open_writer(out, fps=FPS, size=(W, H), audio=wav, quiet=True, frames=30 if announced else None) as w:
         for f in frames:
             w.write(f)
     samples = decode_audio(out)
     onset = np.argmax(np.abs(samples) > 0.1) / 48000
     assert onset == pytest.approx(0.4, abs=0.005)
+
+
+def test_announced_frame_count_runs_one_ffmpeg_and_is_enforced(tmp_path, monkeypatch):
+    from lipsync import encode as encode_mod
+
+    started = []
+    real_popen = encode_mod._popen
+    monkeypatch.setattr(encode_mod, "_popen", lambda cmd, **kw: started.append(cmd) or real_popen(cmd, **kw))
+    wav = write_wav(tmp_path / "a.wav", 0.7)
+    _, frames = colour_frames(20)
+    with open_writer(tmp_path / "one.mp4", fps=FPS, size=(W, H), audio=wav, quiet=True, frames=20) as w:
+        for f in frames:
+            w.write(f)
+    assert len(started) == 1 and str(wav) in started[0]
+    assert probe(tmp_path / "one.mp4")["streams"] == [("video", "h264"), ("audio", "aac")]
+    # fewer frames than announced: an error, and nothing left behind
+    with pytest.raises(EncodeError, match="19 frames were written, 20 were announced"):
+        with open_writer(tmp_path / "short.mp4", fps=FPS, size=(W, H), audio=wav, quiet=True, frames=20) as w:
+            for f in frames[:19]:
+                w.write(f)
+    assert leftovers(tmp_path, "a.wav", "one.mp4") == []
 
 
 def test_missing_or_unreadable_audio_is_input_error_before_any_work(tmp_path):

@@ -1,5 +1,6 @@
 """Flow store: reuse, invalidation of only the affected pairs, damaged entries as misses."""
 
+import json
 import shutil
 import subprocess
 import sys
@@ -12,7 +13,8 @@ from lipsync.bank import Bank
 from lipsync.flows import pair_flows
 from lipsync.normalise import normalise
 from lipsync.preprocess import all_pairs, preprocess
-from lipsync.store import FlowStore, StoreWarning, apply_deadzone
+from lipsync.render import Renderer
+from lipsync.store import FlowStore, StoreWarning, _read_flat_entry, apply_deadzone
 
 
 @pytest.fixture()
@@ -42,7 +44,7 @@ def test_preprocess_twice_then_change_one_image(bank_dir):
     assert "3 stale entries (--prune removes them)" in third.stdout, third.stdout
     fourth = run_cli("preprocess", str(bank_dir), "--quiet", "--prune")
     assert "0 computed, 6 reused" in fourth.stdout and "3 stale entries removed" in fourth.stdout
-    assert len(list((bank_dir / ".lipsync" / "flows").glob("*.npz"))) == 6
+    assert len(list((bank_dir / ".lipsync" / "flows").glob("*.flow"))) == 6
     assert "stale" not in run_cli("preprocess", str(bank_dir), "--quiet").stdout
 
 
@@ -50,7 +52,7 @@ def test_truncated_entry_is_recomputed_with_a_warning(bank_dir):
     bank = Bank.load(bank_dir)
     store = FlowStore.for_bank(bank)
     preprocess(bank, store=store, jobs=1, quiet=True)
-    entries = sorted((store.root / "flows").glob("*.npz"))
+    entries = sorted((store.root / "flows").glob("*.flow"))
     assert len(entries) == 6
     victim = entries[2]
     data = victim.read_bytes()
@@ -102,8 +104,60 @@ def test_stored_fields_match_computed_fields(bank_dir):
     # reversed order gives swapped roles
     rf, rb = store.get_pair(bank, "E", "A")
     np.testing.assert_array_equal(rf.full(), got_b.full())
-    # symmetric storage keeps about half the columns of each crop
-    assert store.size_bytes() < 6 * 2 * bank.shape[0] * bank.shape[1] * 2 * 2 * 0.6
+    # symmetric storage keeps about half the columns of each crop, fields and tables alike
+    meta, arrays = _read_flat_entry(store.pair_path(store.pair_key(bank, "A", "E", nb.axis)))
+    for name in ("forward", "backward"):
+        y0, y1, x0, x1 = meta[name]["crop"]
+        assert arrays[name].shape[1] == meta[name]["half"] <= (x1 - x0 + 1) // 2 + 1
+        tab = arrays[f"inverse_{name}"]
+        assert meta["tables"]["half"] and tab.shape[2] == -(-meta["tables"]["coarse_width"] // 2)
+        assert tab.dtype == np.int16 and tab.shape[0] == meta["tables"]["steps"]
+
+
+def _member_span(path, name):
+    """Byte range of one array member inside a flat store entry."""
+    data = path.read_bytes()
+    hlen = int.from_bytes(data[12:16], "little")
+    header = json.loads(data[16:16 + hlen])
+    start = -(-(16 + hlen) // 64) * 64 + header["members"][name]["offset"]
+    m = header["members"][name]
+    n = int(np.prod(m["shape"])) * np.dtype(m["dtype"]).itemsize
+    return start, start + n
+
+
+@pytest.mark.parametrize("member", ["inverse_forward", "inverse_backward", "forward"])
+def test_a_damaged_table_or_field_is_a_miss(bank_dir, member):
+    bank = Bank.load(bank_dir)
+    store = FlowStore(bank_dir / "store")
+    preprocess(bank, store=store, jobs=1, quiet=True)
+    path = store.pair_path(store.pair_key(bank, "X", "O", normalise(bank).axis))
+    good = path.read_bytes()
+    lo, hi = _member_span(path, member)
+    assert hi - lo > 100
+    data = bytearray(good)
+    data[(lo + hi) // 2] ^= 0x01  # one bit of one table value
+    path.write_bytes(bytes(data))
+    with pytest.warns(StoreWarning, match="checksum mismatch"):
+        assert store.get_pair(bank, "X", "O") is None
+    with pytest.warns(StoreWarning):
+        r = Renderer(bank, store=store)
+        frame = r.render("X", "O", 0.5).copy()
+    assert path.read_bytes() == good  # recomputed to the same bytes by the renderer
+    np.testing.assert_array_equal(frame, Renderer(bank, store=store).render("X", "O", 0.5))
+
+
+def test_entries_of_an_older_format_are_misses(bank_dir, monkeypatch):
+    from lipsync import store as store_mod
+
+    bank = Bank.load(bank_dir)
+    store = FlowStore(bank_dir / "store")
+    monkeypatch.setattr(store_mod, "FORMAT_VERSION", 3)
+    preprocess(bank, store=store, jobs=1, quiet=True)
+    monkeypatch.setattr(store_mod, "FORMAT_VERSION", 4)
+    # the key carries the version: old entries are simply not found (and reported stale)
+    assert store.get_pair(bank, "X", "O") is None
+    report = preprocess(bank, store=store, jobs=1, quiet=True)
+    assert report.computed == 6 and report.stale >= 6
 
 
 def test_store_entries_are_deterministic(bank_dir, tmp_path):
