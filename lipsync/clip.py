@@ -151,11 +151,17 @@ def write_overlapped(frames, write) -> None:
         raise failure[0]
 
 
+def _reporting(frames, total: int, progress):
+    for done, frame in enumerate(frames, 1):
+        yield frame
+        progress(done, total)
+
+
 def render_clip(timeline, output: PathLike, *, bank=None, audio: Optional[PathLike] = None,
                 fps: float = DEFAULT_FPS, map=None, method: str = "flow", timing=DEFAULT_CURVE,
                 format: Optional[str] = None, crf: int = DEFAULT_CRF, preset: str = DEFAULT_PRESET,
                 store=None, jobs: Optional[int] = None, quiet: bool = False,
-                timeline_options=None) -> ClipReport:
+                timeline_options=None, progress=None) -> ClipReport:
     """Render one clip to ``output`` (an mp4, or a folder of numbered PNGs).
 
     Parameters
@@ -184,6 +190,9 @@ def render_clip(timeline, output: PathLike, *, bank=None, audio: Optional[PathLi
     timeline_options : object, optional
         Reader options (attributes ``timeline_format``, ``tier``, ``sample_rate``,
         ``moho_fps``) when ``timeline`` is a path.
+    progress : callable, optional
+        ``progress(done, total)`` after each frame is rendered (``lipsync serve`` reports
+        job progress with it).
 
     Returns
     -------
@@ -217,6 +226,8 @@ def render_clip(timeline, output: PathLike, *, bank=None, audio: Optional[PathLi
                      crf=crf, preset=preset, quiet=True) as writer:
         frames = tqdm(anim.frames(copy=False), total=len(anim), desc="render", unit="frame",
                       disable=quiet, leave=False)
+        if progress is not None:
+            frames = _reporting(frames, len(anim), progress)
         write_overlapped(frames, writer.write)
     t2 = time.perf_counter()
     return ClipReport(output=str(output), frames=len(anim), fps=float(fps), size=(w, h), method=method,

@@ -2,12 +2,14 @@
 
 * :mod:`.causal` — :class:`CausalSequencer`: the sequencer's rules on a growing track,
   with the look-ahead they imply (:data:`LOOKAHEAD_S`, 380 ms);
-* :mod:`.animator` — :class:`LiveAnimator`: label mapping, thread safety, rendering.
+* :mod:`.animator` — :class:`LiveAnimator`: label mapping, thread safety, rendering;
+* :mod:`.pool` — :class:`RendererPool`: renderers shared by many animators.
 
 ``lipsync serve`` (:mod:`lipsync.server`) streams these frames to browsers.
 """
 
 from .animator import LiveAnimator
 from .causal import LOOKAHEAD_S, RELAX_S, CausalSequencer
+from .pool import RendererPool
 
-__all__ = ["LiveAnimator", "CausalSequencer", "LOOKAHEAD_S", "RELAX_S"]
+__all__ = ["LiveAnimator", "CausalSequencer", "RendererPool", "LOOKAHEAD_S", "RELAX_S"]

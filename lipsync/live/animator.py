@@ -29,12 +29,12 @@ import numpy as np
 from ..bank import Bank
 from ..errors import InputError, TimelineError
 from ..phonemes import DEFAULT_MAP, PhonemeMap, bank_viseme_timeline, check_map_against, load_map
-from ..render import Renderer
 from ..sequencer import FrameSpec
 from ..store import FlowStore
 from ..timeline import PHONEME, VISEME, Segment, Timeline
 from ..timing import DEFAULT_CURVE
 from .causal import LOOKAHEAD_S, CausalSequencer
+from .pool import RendererPool
 
 #: What a pushed label may be; ``None`` (auto) tries them in the order of
 #: :meth:`LiveAnimator.resolve`.
@@ -75,6 +75,9 @@ class LiveAnimator:
         bound the sequencer's rules imply. It does not change which frame is shown.
     store : FlowStore, optional
         Flow store (default: the bank's).
+    renderer : RendererPool, optional
+        Renderers shared with other animators (a server's sessions); default: a pool of
+        one of its own. ``method`` and ``store`` are then the pool's.
     prepare : bool
         Compute missing flows now (all pairs) so that no frame waits for one; default True
         for the ``flow`` and ``splat`` methods.
@@ -91,7 +94,7 @@ class LiveAnimator:
     def __init__(self, bank: Union[Bank, str, "os.PathLike[str]"], fps: float = 25, *,
                  map: Union[str, "os.PathLike[str]", PhonemeMap, None] = None, timing=DEFAULT_CURVE,
                  method: str = "flow", lookahead: Optional[float] = None, store: Optional[FlowStore] = None,
-                 prepare: Optional[bool] = None):
+                 renderer: Optional[RendererPool] = None, prepare: Optional[bool] = None):
         self.bank = bank if isinstance(bank, Bank) else Bank.load(bank)
         self.pmap = map if isinstance(map, PhonemeMap) else load_map(map or DEFAULT_MAP)
         self._map_path = map if isinstance(map, (str, os.PathLike)) and os.path.isfile(map) else None
@@ -102,15 +105,14 @@ class LiveAnimator:
             raise InputError(f"lookahead must be 0..60 s, got {lookahead!r}")
         self._seq = CausalSequencer(fps=fps, rest=self.bank.rest, timing=timing, closures=self._bank_map.closures)
         self.fps = self._seq.fps
-        self.renderer = Renderer(self.bank, method=method, store=store)
+        self.renderer = renderer if renderer is not None else RendererPool(self.bank, method=method, store=store, size=1)
         if prepare is None:
             prepare = self.renderer.method in ("flow", "splat")
         if prepare:
             from ..preprocess import preprocess
 
             preprocess(self.bank, store=self.renderer.store, quiet=True, normalised=self.renderer.nb)
-        self._state = threading.Lock()   # the track and its plan
-        self._render = threading.Lock()  # the renderer's buffers
+        self._state = threading.Lock()   # the track and its plan (the pool guards the renderers)
         self._warned: set = set()
         self._words = _word_phones()
         # viseme names a map knows under other names (Preston Blair's MBP, etc, rest ...)
@@ -265,10 +267,7 @@ class LiveAnimator:
     def frame(self, n: int, *, out: Optional[np.ndarray] = None) -> np.ndarray:
         """Frame ``n`` as RGB ``uint8`` (a new array unless ``out`` is given)."""
         spec = self.spec(n)
-        if out is None:
-            out = np.empty(self.renderer.shape + (3,), np.uint8)
-        with self._render:
-            return self.renderer.render(spec.from_viseme, spec.to_viseme, spec.alpha, out=out)
+        return self.renderer.render(spec.from_viseme, spec.to_viseme, spec.alpha, out=out)
 
     def frame_at(self, t: float, *, out: Optional[np.ndarray] = None) -> np.ndarray:
         """The frame for playback time ``t`` seconds, RGB ``uint8`` ``(H, W, 3)``.
