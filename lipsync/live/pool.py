@@ -62,3 +62,19 @@ class RendererPool:
             return renderer.render(from_viseme, to_viseme, alpha, out=out)
         finally:
             self._free.put(renderer)
+
+    def warm(self, pairs) -> None:
+        """Make every renderer's state for the ``(from, to)`` viseme ``pairs`` now.
+
+        A pair's first in-between frame allocates its buffers and solves its anchors; a
+        server that warms the pairs its speech uses keeps that off the live path.
+        """
+        renderers = [self._free.get() for _ in range(self.size)]
+        try:
+            out = np.empty(self.shape + (3,), np.uint8)
+            for r in renderers:
+                for a, b in pairs:
+                    r.render(a, b, 0.5, out=out)
+        finally:
+            for r in renderers:
+                self._free.put(r)
