@@ -17,7 +17,7 @@
   // How often the clock is sent; the server extrapolates between messages.
   const CLOCK_EVERY_MS = 100;
 
-  const stats = { frames: 0, final: 0, errors: 0, lastN: -1 };
+  const stats = { frames: 0, final: 0, errors: 0, lastN: -1, provisional: [] };
   window.lipsyncDemo = stats;  // read by the browser test
   let events = [], pushed = 0, ws = null, timer = null;
   let clockStart = null;       // fallback clock when the audio cannot play (no sound device)
@@ -52,7 +52,7 @@
     ctx.drawImage(bitmap, 0, 0, canvas.width, canvas.height);
     bitmap.close();
     stats.frames++; stats.lastN = n;
-    if (flags & 1) stats.final++;
+    if (flags & 1) stats.final++; else stats.provisional.push(n);
     show("frames", stats.frames); show("final", stats.final);
     show("lag", ((now() - t) * 1000).toFixed(0) + " ms");
   }
