@@ -19,7 +19,7 @@ import lipsync
 from lipsync import Animator, Bank, read_timeline
 from lipsync._data import default_bank_dir
 from lipsync.errors import InputError
-from lipsync.live import LOOKAHEAD_S, LiveAnimator
+from lipsync.live import LOOKAHEAD_S, LiveAnimator, RendererPool
 from lipsync.sequencer import MAX_HELD_PAUSE_S, MAX_TRANSITION_S
 from lipsync.timeline import Segment, Timeline
 
@@ -37,6 +37,12 @@ TTS = [ROOT / "tests/data/timelines" / name for name in
 @pytest.fixture(scope="module")
 def bank():
     return Bank.load(default_bank_dir())
+
+
+@pytest.fixture(scope="module")
+def pool(bank):
+    # one renderer for the live side of several tests: its per-pair states are made once
+    return RendererPool(bank, size=1)
 
 
 def _timeline(path):
@@ -108,12 +114,12 @@ def test_long_recording_is_planned_in_windows(bank):
 
 
 @pytest.mark.parametrize("path", [REAL[0], REAL[1], REAL[5]], ids=lambda p: p.name)
-def test_rendered_frames_equal_the_offline_animator_pixel_for_pixel(bank, path):
+def test_rendered_frames_equal_the_offline_animator_pixel_for_pixel(bank, pool, path):
     tl = _timeline(path)
     offline = Animator(bank, tl, fps=25)
-    live = LiveAnimator(bank, fps=25)
+    live = LiveAnimator(bank, fps=25, renderer=pool)
     live.push(tl)
-    frames = range(len(offline)) if len(offline) < 200 else range(0, len(offline), 7)
+    frames = range(0, len(offline), 3 if len(offline) < 100 else 23)
     for n in frames:
         a = offline.frame(n)
         b = live.frame_at(n / 25 + 0.001)
@@ -158,7 +164,7 @@ def test_lookahead_is_derived_from_the_sequencer_constants_and_nearly_tight(bank
 
 def test_measured_lookahead_on_real_timelines_is_within_the_bound(bank):
     # The smallest lag (10 ms steps) from which live frames equal offline ones, per file.
-    for path in REAL[:4]:
+    for path in REAL[:2]:
         tl = _timeline(path)
         offline = Animator(bank, tl, fps=25).specs
         needed = 0.0
@@ -194,7 +200,7 @@ def test_push_and_frame_from_different_threads(bank):
                 final = live.is_final(t)  # decided before the frame is made
                 frame = live.frame(n)
                 seen.append((n, final, frame))
-                t += 0.013
+                t += 0.047
         except BaseException as exc:  # pragma: no cover
             errors.append(exc)
 
@@ -204,10 +210,14 @@ def test_push_and_frame_from_different_threads(bank):
     for th in threads:
         th.join(30)
     assert not errors and not any(th.is_alive() for th in threads)
-    finals = [(n, f) for n, final, f in seen if final and n < len(offline)]
+    finals = {}
+    for n, final, frame in seen:
+        if final and n < len(offline):
+            finals.setdefault(n, []).append(frame)
     assert len(finals) > 20
-    for n, frame in finals:
-        assert np.array_equal(frame, offline.frame(n)), n
+    for n, frames in finals.items():
+        want = offline.frame(n)
+        assert all(np.array_equal(f, want) for f in frames), n
 
 
 def test_clock_ahead_of_the_data_holds_then_relaxes_to_rest(bank):
