@@ -79,7 +79,8 @@ def peak_mb(fn: Callable[[], object]) -> float:
 
 def _table(rows: List[dict]) -> str:
     lines = []
-    for fig in ("beier_neely_field", "frame", "end_to_end", "store"):
+    # every figure that produced rows, in the order they ran
+    for fig in dict.fromkeys(r["figure"] for r in rows):
         sel = [r for r in rows if r["figure"] == fig]
         if not sel:
             continue
