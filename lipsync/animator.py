@@ -53,8 +53,8 @@ class Animator:
     store : FlowStore, optional
         Flow store (default: the bank's). Missing flows are computed on first use.
     timeline_options : argparse.Namespace, optional
-        Reader options (``timeline_format``, ``tier``, ``sample_rate``, ``moho_fps``) used
-        when ``timeline`` is a path.
+        Reader options (``timeline_format``, ``tier``, ``sample_rate``, ``moho_fps``, and
+        ``text``, an audio file's transcript) used when ``timeline`` is a path.
 
     Attributes
     ----------
@@ -73,7 +73,7 @@ class Animator:
             o = timeline_options
             timeline = read_timeline(timeline, getattr(o, "timeline_format", None), tier=getattr(o, "tier", None),
                                      sample_rate=getattr(o, "sample_rate", 16000),
-                                     fps=getattr(o, "moho_fps", 24.0))
+                                     fps=getattr(o, "moho_fps", 24.0), text=getattr(o, "text", None))
         pmap = map if isinstance(map, PhonemeMap) else load_map(map or DEFAULT_MAP)
         map_path = map if isinstance(map, (str, os.PathLike)) and os.path.isfile(map) else None
         self.visemes, pmap = bank_viseme_timeline(timeline, pmap, self.bank.names, rest=self.bank.rest,
@@ -81,6 +81,51 @@ class Animator:
         self.specs: List[FrameSpec] = sequence(self.visemes, fps=self.fps, rest=self.bank.rest, timing=timing,
                                                closures=pmap.closures)
         self.renderer = Renderer(self.bank, method=method, store=store)
+
+    @classmethod
+    def from_audio(cls, bank: Union[Bank, str, "os.PathLike[str]"], audio, text: Optional[str] = None,
+                   fps: float = 25, **kwargs) -> "Animator":
+        """An Animator for a speech recording: aligned with pocketsphinx, then as usual.
+
+        Parameters
+        ----------
+        bank : Bank or path-like
+            The subject.
+        audio : path-like or numpy.ndarray
+            Any audio file ffmpeg reads, or 16 kHz mono samples (int16, or floats in -1..1).
+        text : str, optional
+            The transcript, or a text file holding it; None: the words are recognised.
+        fps : float
+            Output frame rate.
+        **kwargs
+            ``map``, ``method``, ``timing``, ``store`` as for :class:`Animator`.
+
+        Returns
+        -------
+        Animator
+            With ``alignment`` (the :class:`lipsync.speech.align.Alignment`: words and phones).
+
+        Examples
+        --------
+        >>> import os
+        >>> from lipsync import Animator
+        >>> from lipsync._data import default_bank_dir
+        >>> wav = os.path.join(os.path.dirname(default_bank_dir()), "..", "samples", "hello.wav")
+        >>> anim = Animator.from_audio(default_bank_dir(), wav, "Hello, I am a talking head made by lipsync.")
+        >>> len(anim), anim.alignment.words.labels()[:4]
+        (75, ['hello', 'i', 'am', 'a'])
+        """
+        import warnings
+
+        from .speech.align import MissingWordsWarning, align
+
+        with warnings.catch_warnings():
+            # "lipsync" is not in CMUdict; the caller can read alignment.missing instead.
+            warnings.simplefilter("ignore", MissingWordsWarning)
+            alignment = align(audio, text)
+        anim = cls(bank, alignment.phones, fps=fps, **kwargs)
+        anim.alignment = alignment
+        return anim
 
     def __len__(self) -> int:
         return len(self.specs)

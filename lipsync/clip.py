@@ -174,7 +174,7 @@ def render_clip(timeline, output: PathLike, *, bank=None, audio: Optional[PathLi
     bank : Bank or path-like, optional
         The subject (default: the shipped toon).
     audio : path-like, optional
-        Speech to mux (mp4 only).
+        Speech to mux (mp4 only). Default: ``timeline`` itself when it is an audio file.
     fps, map, method, timing
         As for :class:`lipsync.Animator`.
     format : str, optional
@@ -189,7 +189,7 @@ def render_clip(timeline, output: PathLike, *, bank=None, audio: Optional[PathLi
         No progress bars.
     timeline_options : object, optional
         Reader options (attributes ``timeline_format``, ``tier``, ``sample_rate``,
-        ``moho_fps``) when ``timeline`` is a path.
+        ``moho_fps``, ``text``) when ``timeline`` is a path.
     progress : callable, optional
         ``progress(done, total)`` after each frame is rendered (``lipsync serve`` reports
         job progress with it).
@@ -216,6 +216,11 @@ def render_clip(timeline, output: PathLike, *, bank=None, audio: Optional[PathLi
         bank = Bank.load(bank or default_bank_dir())
     if not isinstance(store, FlowStore):
         store = FlowStore.for_bank(bank, store)
+    if audio is None and out_format != "png" and not hasattr(timeline, "segments"):
+        from .readers.audio import is_audio_input
+
+        if is_audio_input(timeline, getattr(timeline_options, "timeline_format", None)):
+            audio = timeline  # speech in: its own sound is the soundtrack
     anim = Animator(bank, timeline, fps=fps, map=map, method=method, timing=timing, store=store,
                     timeline_options=timeline_options)
     if method in ("flow", "splat"):

@@ -154,11 +154,13 @@ _OVERLAP_TOLERANCE_S = 1e-4
 
 @dataclass(frozen=True)
 class ReadOptions:
-    """What a reader may need besides the text: chosen tier, TIMIT sample rate, Moho frame rate."""
+    """What a reader may need besides the file: chosen tier, TIMIT sample rate, Moho frame rate,
+    and an audio file's transcript (``text``: the text or a file holding it)."""
 
     tier: Optional[str] = None
     sample_rate: float = 16000
     fps: float = 24.0
+    text: Optional[str] = None
 
 
 @dataclass(frozen=True)
@@ -181,7 +183,7 @@ _SNIFF_BYTES = 4096
 
 
 def read_timeline(path: PathLike, format: Optional[str] = None, *, tier: Optional[str] = None,
-                  sample_rate: float = 16000, fps: float = 24.0) -> Timeline:
+                  sample_rate: float = 16000, fps: float = 24.0, text: Optional[str] = None) -> Timeline:
     """Read a phoneme or viseme timeline from any supported file.
 
     Parameters
@@ -196,6 +198,8 @@ def read_timeline(path: PathLike, format: Optional[str] = None, *, tier: Optiona
         Samples per second of TIMIT ``.phn`` times (16000 for TIMIT itself).
     fps : float
         Frame rate of a Moho switch ``.dat`` file (frames are 1-based).
+    text : str, optional
+        For audio: its transcript, or a file holding it (default: the words are recognised).
 
     Returns
     -------
@@ -239,7 +243,7 @@ def read_timeline(path: PathLike, format: Optional[str] = None, *, tier: Optiona
         raise TimelineError("empty file", path=name, line=1)
     if reader is None:
         reader = _choose_reader(name, data)
-    options = ReadOptions(tier=tier, sample_rate=float(sample_rate), fps=float(fps))
+    options = ReadOptions(tier=tier, sample_rate=float(sample_rate), fps=float(fps), text=text)
     return reader.read(name, data, options)
 
 

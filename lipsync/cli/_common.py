@@ -54,7 +54,7 @@ def check_png(path: str) -> None:
 
 
 def add_timeline_options(parser: argparse.ArgumentParser) -> None:
-    """Add --timeline-format, --tier, --sample-rate, --moho-fps, --map and --timing to ``parser``."""
+    """Add --timeline-format, --tier, --sample-rate, --moho-fps, --text, --map and --timing to ``parser``."""
     group = parser.add_argument_group("timeline input")
     group.add_argument("--timeline-format", choices=READERS.names(), default=None, metavar="NAME",
                        help="input timeline format (default: from the extension, then the content); "
@@ -65,6 +65,9 @@ def add_timeline_options(parser: argparse.ArgumentParser) -> None:
                        help="samples per second of TIMIT .phn times (default: 16000)")
     group.add_argument("--moho-fps", type=float, default=DEFAULT_MOHO_FPS, metavar="N",
                        help="frame rate a Moho .dat file was written at (default: 24)")
+    group.add_argument("--text", default=None, metavar="TEXT_OR_FILE",
+                       help="for audio input: its transcript, or a text file holding it "
+                            "(default: the words are recognised)")
     group.add_argument("--map", default=DEFAULT_MAP, metavar="NAME_OR_FILE",
                        help=f"phoneme-to-viseme map: a shipped name ({', '.join(MAPS.names())}) "
                             f"or a YAML file (default: {DEFAULT_MAP})")
@@ -110,7 +113,8 @@ def load_viseme_timeline(args: argparse.Namespace, *, rest: Optional[str] = None
     timeline = read_timeline(args.timeline, getattr(args, "timeline_format", None),
                              tier=getattr(args, "tier", None),
                              sample_rate=getattr(args, "sample_rate", 16000),
-                             fps=getattr(args, "moho_fps", DEFAULT_MOHO_FPS))
+                             fps=getattr(args, "moho_fps", DEFAULT_MOHO_FPS),
+                             text=getattr(args, "text", None))
     map_arg = str(getattr(args, "map", None) or "")
     return bank_viseme_timeline(timeline, pmap, viseme_names, rest=rest,
                                 map_path=map_arg if os.path.isfile(map_arg) else None)

@@ -9,7 +9,8 @@ from __future__ import annotations
 
 import importlib
 
-MODULES = ["textgrid", "gentle", "rhubarb", "polly", "azure", "words", "moho", "timit", "audacity"]
+# Audio comes last: its sniffing checks binary magic numbers no text format has.
+MODULES = ["textgrid", "gentle", "rhubarb", "polly", "azure", "words", "moho", "timit", "audacity", "audio"]
 
 _loaded = False
 
