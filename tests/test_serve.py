@@ -377,3 +377,30 @@ def test_cli_serve_prints_its_url_and_serves_on_loopback():
     finally:
         proc.terminate()
         proc.wait(10)
+
+
+def test_render_job_from_audio_and_text_gives_video_with_the_speech(srv, tmp_path):
+    import imageio_ffmpeg
+    from urllib.parse import quote
+
+    text = (ROOT / "samples" / "hello.lab").read_text()
+    r = httpx.post(srv.url("/api/render") + "&name=hello.wav&text=" + quote(text),
+                   content=(ROOT / "samples" / "hello.wav").read_bytes())
+    assert r.status_code == 202
+    state, _ = _wait_job(srv, r.json()["job"])
+    assert state["state"] == "done", state
+    out = tmp_path / "speech.mp4"
+    out.write_bytes(httpx.get(srv.url(state["video"])).content)
+    probe = subprocess.run([imageio_ffmpeg.get_ffmpeg_exe(), "-hide_banner", "-i", str(out)],
+                           capture_output=True, text=True).stderr
+    assert "Video: h264" in probe and "Audio: aac" in probe  # the upload is the soundtrack
+    cap = cv2.VideoCapture(str(out))
+    frames = []
+    while True:
+        ok, frame = cap.read()
+        if not ok:
+            break
+        frames.append(frame.astype(np.int16))
+    assert len(frames) == 75  # 2.97 s of audio at 25 fps
+    # the aligned speech moves the mouth: frames in the middle differ from the first (rest)
+    assert max(np.abs(f - frames[0]).mean() for f in frames[20:60]) > 1.0
