@@ -19,7 +19,7 @@ import lipsync
 from lipsync import Animator, Bank, read_timeline
 from lipsync._data import default_bank_dir
 from lipsync.errors import InputError
-from lipsync.live import LOOKAHEAD_S, LiveAnimator, RendererPool
+from lipsync.live import LOOKAHEAD_S, LiveAnimator, RendererPool, replay_specs
 from lipsync.sequencer import MAX_HELD_PAUSE_S, MAX_TRANSITION_S
 from lipsync.timeline import Segment, Timeline
 
@@ -67,41 +67,30 @@ def _random_visemes(seed: int) -> Timeline:
 
 
 def _replay(live: LiveAnimator, timeline: Timeline, n_frames: int, lag: float):
-    """Push the mapped timeline one segment at a time; ask for frame n as soon as the data
-    reaches ``lag`` past its time. Returns the FrameSpecs as they were first answered."""
-    segs = live.resolve_timeline(timeline)
-    got, n = [], 0
-    for seg in segs:
-        live.push(*seg, kind="viseme")
-        while n < n_frames and n / live.fps + lag <= seg[1] + 1e-12:
-            got.append(live.spec(n))
-            n += 1
-    got.extend(live.spec(k) for k in range(n, n_frames))
-    return got
+    return replay_specs(live, live.resolve_timeline(timeline), n_frames, lag)
 
 
 def test_exported_from_lipsync():
     assert lipsync.LiveAnimator is LiveAnimator
 
 
-@pytest.mark.parametrize("path", REAL + TTS, ids=lambda p: p.name)
-@pytest.mark.parametrize("fps", [25, 30])
-def test_everything_pushed_first_gives_the_offline_frame_specs(bank, path, fps):
-    tl = _timeline(path)
+def _pushed_first_equals_offline(bank, tl, fps):
     offline = Animator(bank, tl, fps=fps).specs
     live = LiveAnimator(bank, fps=fps, prepare=False)
     live.push(tl)
     assert [live.spec(n) for n in range(len(offline))] == offline
+
+
+@pytest.mark.parametrize("path", REAL + TTS, ids=lambda p: p.name)
+@pytest.mark.parametrize("fps", [25, 30])
+def test_everything_pushed_first_gives_the_offline_frame_specs(bank, path, fps):
+    _pushed_first_equals_offline(bank, _timeline(path), fps)
 
 
 @pytest.mark.parametrize("seed", range(12))
 @pytest.mark.parametrize("fps", [7, 25, 60])
 def test_random_tracks_pushed_first_give_the_offline_frame_specs(bank, seed, fps):
-    tl = _random_visemes(seed)
-    offline = Animator(bank, tl, fps=fps).specs
-    live = LiveAnimator(bank, fps=fps, prepare=False)
-    live.push(tl)
-    assert [live.spec(n) for n in range(len(offline))] == offline
+    _pushed_first_equals_offline(bank, _random_visemes(seed), fps)
 
 
 def test_long_recording_is_planned_in_windows(bank):

@@ -85,6 +85,7 @@ def test_demo_page_plays_and_draws_the_live_head(browser, server):
         time.sleep(0.1)
     stats = browser.execute_script("return window.lipsyncDemo")
     status = browser.execute_script(STATUS)
+    print(f"\ndemo page: {stats['frames']} frames, {stats['final']} final, status {status!r}")
     assert stats["errors"] == 0, status
     assert stats["frames"] >= 30, (stats, status)       # ~25 fps for the 3 s sentence
     # events are pushed 1 s ahead of the audio, more than the look-ahead: frames arrive final,

@@ -33,23 +33,11 @@ def _timeline(path):
         return read_timeline(path)
 
 
-def replay_specs(live, segments, n_frames: int, lag: float):
-    """Push ``segments`` one by one; take frame n's spec when the data reaches ``lag`` past it."""
-    got, n = [], 0
-    for seg in segments:
-        live.push(*seg, kind="viseme")
-        while n < n_frames and n / live.fps + lag <= seg[1] + 1e-12:
-            got.append(live.spec(n))
-            n += 1
-    got.extend(live.spec(k) for k in range(n, n_frames))
-    return got
-
-
 def bench_lookahead(rows: List[dict], ctx: Context) -> None:
     from .._data import default_bank_dir
     from ..animator import Animator
     from ..bank import Bank
-    from ..live import LOOKAHEAD_S, LiveAnimator
+    from ..live import LOOKAHEAD_S, LiveAnimator, replay_specs
 
     bank = Bank.load(default_bank_dir())
     root = default_bank_dir().parents[1]

@@ -8,8 +8,8 @@
 ``lipsync serve`` (:mod:`lipsync.server`) streams these frames to browsers.
 """
 
-from .animator import LiveAnimator
+from .animator import LiveAnimator, replay_specs
 from .causal import LOOKAHEAD_S, RELAX_S, CausalSequencer
 from .pool import RendererPool
 
-__all__ = ["LiveAnimator", "CausalSequencer", "RendererPool", "LOOKAHEAD_S", "RELAX_S"]
+__all__ = ["LiveAnimator", "replay_specs", "CausalSequencer", "RendererPool", "LOOKAHEAD_S", "RELAX_S"]

@@ -280,3 +280,32 @@ class LiveAnimator:
     def shape(self) -> Tuple[int, int]:
         """Frame height and width."""
         return self.renderer.shape
+
+
+def replay_specs(live: LiveAnimator, segments, n_frames: int, lag: float) -> List[FrameSpec]:
+    """The FrameSpecs a stream shows when each frame is taken ``lag`` seconds behind the data.
+
+    ``segments`` (viseme segments, e.g. from :meth:`LiveAnimator.resolve_timeline`) are
+    pushed one at a time; frame n is taken as soon as the data reaches ``n / fps + lag``.
+    With ``lag`` >= the look-ahead the result equals the offline frames (tests, ``make bench``).
+
+    Examples
+    --------
+    >>> from lipsync._data import default_bank_dir
+    >>> live = LiveAnimator(default_bank_dir(), fps=10, prepare=False)
+    >>> segs = [(0.0, 0.5, "X"), (0.5, 0.9, "D"), (0.9, 1.3, "X")]
+    >>> [s.shown or "~" for s in replay_specs(live, segs, 13, 0.0)][3:8]   # no look-ahead: late
+    ['X', 'X', 'X', 'D', 'D']
+    >>> live = LiveAnimator(default_bank_dir(), fps=10, prepare=False)
+    >>> [s.shown or "~" for s in replay_specs(live, segs, 13, LOOKAHEAD_S)][3:8]
+    ['X', 'X', '~', 'D', 'D']
+    """
+    got: List[FrameSpec] = []
+    n = 0
+    for seg in segments:
+        live.push(*seg, kind="viseme")
+        while n < n_frames and n / live.fps + lag <= seg[1] + 1e-12:
+            got.append(live.spec(n))
+            n += 1
+    got.extend(live.spec(k) for k in range(n, n_frames))
+    return got
