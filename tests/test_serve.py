@@ -236,12 +236,13 @@ def _settle(srv, timeout=5.0) -> bool:
 def test_20_concurrent_sessions_then_nothing_leaked(srv):
     events = hello_events()
 
-    async def one(k):
+    async def one(k, release):
         async with await _connect(srv) as ws:
             await ws.recv()
             await ws.send(json.dumps({"type": "push", "events": events}))
             await ws.send(json.dumps({"type": "clock", "t": 0.04 * k}))
             frames, texts = await _frames(ws, 3, timeout=60)
+            await release.wait()  # all 20 stay open until the 21st has been refused
             return frames[0][0], [t for t in texts if t["type"] == "error"]
 
     async def refused():
@@ -255,9 +256,14 @@ def test_20_concurrent_sessions_then_nothing_leaked(srv):
     async def round_(extra: bool):
         async with await _connect(srv) as holder:  # noqa: F841 - part of the 20
             await holder.recv()
-            tasks = [asyncio.create_task(one(k)) for k in range(19)]
-            await asyncio.sleep(0.5)
+            release = asyncio.Event()
+            tasks = [asyncio.create_task(one(k, release)) for k in range(19)]
+            deadline = time.monotonic() + 60
+            while len(srv.server.sessions) < 20 and time.monotonic() < deadline:
+                await asyncio.sleep(0.05)  # all 20 open before the 21st knocks
+            assert len(srv.server.sessions) == 20
             over = await refused() if extra else None
+            release.set()
             return await asyncio.gather(*tasks), over
 
     # Warm-up: every renderer of the pool gets the pair states this speech uses (each a few

