@@ -39,9 +39,10 @@ _EXPORTS = {
     "Renderer": "render",
     "morph": "render",
     "Animator": "animator",
+    "LiveAnimator": "live",
 }
 _SUBMODULES = {"warp", "bank", "normalise", "flows", "store", "render", "timeline", "phonemes",
-               "sequencer", "timing", "encode", "animator", "registry", "errors", "cli", "preview", "clip"}
+               "sequencer", "timing", "encode", "animator", "registry", "errors", "cli", "preview", "clip", "live"}
 
 
 def __getattr__(name: str) -> Any:

@@ -156,6 +156,8 @@ def write_overlapped(frames, write) -> None:
 def render_parallel(render_into, n: int, shape, write, *, threads: Optional[int] = None, progress=None) -> None:
     """Render frames ``0..n-1`` on worker threads and ``write`` them in order from this one.
 
+    ``progress(done)``, if given, is called after each frame is written.
+
     ``render_into(i, buf)`` fills ``buf`` (a ``shape`` uint8 array) with frame i; it must be
     safe to call from several threads (the renderer's kernels release the GIL, so threads
     render in parallel). At most :data:`QUEUE_FRAMES` frames are in flight, each in its own
@@ -185,7 +187,7 @@ def render_parallel(render_into, n: int, shape, write, *, threads: Optional[int]
                 buf = pending.pop(i).result()
                 write(buf)
                 if progress is not None:
-                    progress.update(1)
+                    progress(i + 1)
                 free.append(buf)
         finally:
             for fut in pending.values():
@@ -196,7 +198,7 @@ def render_clip(timeline, output: PathLike, *, bank=None, audio: Optional[PathLi
                 fps: float = DEFAULT_FPS, map=None, method: str = "flow", timing=DEFAULT_CURVE,
                 format: Optional[str] = None, crf: int = DEFAULT_CRF, preset: str = DEFAULT_PRESET,
                 store=None, jobs: Optional[int] = None, quiet: bool = False,
-                timeline_options=None) -> ClipReport:
+                timeline_options=None, progress=None) -> ClipReport:
     """Render one clip to ``output`` (an mp4, or a folder of numbered PNGs).
 
     Parameters
@@ -225,6 +227,9 @@ def render_clip(timeline, output: PathLike, *, bank=None, audio: Optional[PathLi
     timeline_options : object, optional
         Reader options (attributes ``timeline_format``, ``tier``, ``sample_rate``,
         ``moho_fps``, ``text``) when ``timeline`` is a path.
+    progress : callable, optional
+        ``progress(done, total)`` after each frame is rendered (``lipsync serve`` reports
+        job progress with it).
 
     Returns
     -------
@@ -271,8 +276,13 @@ def render_clip(timeline, output: PathLike, *, bank=None, audio: Optional[PathLi
     with open_writer(output, fps=fps, size=(w, h), format=out_format, audio=audio,
                      crf=crf, preset=preset, quiet=True, frames=n or None) as writer:
         with tqdm(total=n, desc="render", unit="frame", disable=quiet, leave=False) as bar:
+            def on_frame(done: int) -> None:
+                bar.update(1)
+                if progress is not None:
+                    progress(done, n)
+
             render_parallel(lambda i, buf: anim.frame(i, out=buf), n, (h, w, 3), writer.write,
-                            threads=threads, progress=bar)
+                            threads=threads, progress=on_frame)
     t2 = time.perf_counter()
     return ClipReport(output=str(output), frames=len(anim), fps=float(fps), size=(w, h), method=method,
                       seconds_setup=t1 - t0, seconds_render=t2 - t1)

@@ -159,8 +159,11 @@ def check_fps(fps: float) -> float:
 
 def plan_segments(visemes: Timeline, *, rest: str, closures: Iterable[str] = (),
                   max_held_pause: float = MAX_HELD_PAUSE_S, min_segment: float = MIN_SEGMENT_S,
-                  duration: Optional[float] = None) -> List[Tuple[float, float, str]]:
-    """Rules 1-4: the cleaned viseme track (start, end, viseme) that covers [0, duration].
+                  duration: Optional[float] = None, start: float = 0.0) -> List[Tuple[float, float, str]]:
+    """Rules 1-4: the cleaned viseme track (start, end, viseme) that covers [start, duration].
+
+    ``start`` (default 0) is where the track begins; the live animator
+    (:mod:`lipsync.live`) plans from a cut point with it, on segments that begin there.
 
     Examples
     --------
@@ -173,7 +176,7 @@ def plan_segments(visemes: Timeline, *, rest: str, closures: Iterable[str] = (),
     total = visemes.duration if duration is None else float(duration)
     # Rule 1: gaps are rest.
     segs: List[Segment] = []
-    t = 0.0
+    t = float(start)
     for s in visemes:
         if s.start > total:
             break
@@ -310,9 +313,66 @@ def sequence(visemes: Timeline, *, fps: float, rest: str, timing: Union[str, Cur
         return []
     segs = plan_segments(visemes, rest=rest, closures=closure_set, max_held_pause=max_held_pause,
                          min_segment=min_segment, duration=total)
-    names = [v for _, _, v in segs]
     windows = plan_transitions(segs, max_transition=max_transition, hold_half_width=hold_half_width)
-    times = np.arange(n_frames, dtype=np.float64) / fps
+    return frame_specs(segs, windows, fps=fps, curve=curve, closures=closure_set, stop=n_frames)
+
+
+def frame_specs(segments: Sequence[Tuple[float, float, str]], windows: np.ndarray, *, fps: float, curve: Curve,
+                closures: Iterable[str] = (), first: int = 0, stop: int, end: Optional[int] = None) -> List[FrameSpec]:
+    """Rules 6-7: the FrameSpecs of frames ``first .. stop - 1`` of a planned track.
+
+    ``segments`` come from :func:`plan_segments`, ``windows`` from :func:`plan_transitions`;
+    ``end`` is the number of frames of the whole track (default ``stop``). The result is the
+    slice ``[first, stop)`` of the frames of the whole track: :func:`sequence` asks for all of
+    them, the live animator (:mod:`lipsync.live`) for parts. Frame n shows time ``n / fps``.
+
+    Examples
+    --------
+    >>> segs = [(0, 0.3, "X"), (0.3, 0.6, "D")]
+    >>> [f.shown or "~" for f in frame_specs(segs, plan_transitions(segs), fps=10,
+    ...                                       curve=get_curve("linear"), first=2, stop=6)]
+    ['X', '~', 'D', 'D']
+    """
+    end = stop if end is None else end
+    if stop <= first:
+        return []
+    # Rule 7 may force a frame of [first, stop) for a closure whose own frames lie partly
+    # outside it, and a forced frame counts as shown for a later closure: take in every
+    # closure whose forced frame would land in the range being computed, and widen the
+    # range to cover its frames, until nothing changes.
+    closure_set = set(closures)
+    spans = []  # (lo, hi, nearest, viseme) per closure, in track order
+    for s, e, v in segments:
+        if v in closure_set:
+            lo = max(int(math.ceil(s * fps - _EPS)), 0)
+            hi = min(int(math.ceil(e * fps - _EPS)) - 1, end - 1)
+            nearest = min(max(int(round(0.5 * (s + e) * fps)), 0), end - 1)
+            spans.append((lo, hi, nearest, v))
+    r0, r1 = first, stop
+    taken = [False] * len(spans)
+    changed = True
+    while changed:
+        changed = False
+        for i, (lo, hi, nearest, _) in enumerate(spans):
+            if not taken[i] and r0 <= nearest < r1:
+                taken[i] = changed = True
+                r0, r1 = min(r0, lo), max(r1, hi + 1)
+    specs = _held_and_transition_specs(segments, windows, fps=fps, curve=curve, first=r0, stop=r1)
+
+    # Rule 7: every closure is shown exactly on at least one frame.
+    for i, (lo, hi, nearest, v) in enumerate(spans):
+        if not taken[i] or any(specs[n - r0].shown == v for n in range(lo, hi + 1)):
+            continue
+        specs[nearest - r0] = FrameSpec(v, v, 0.0)
+    return specs[first - r0:stop - r0]
+
+
+def _held_and_transition_specs(segments, windows, *, fps: float, curve: Curve, first: int, stop: int
+                               ) -> List[FrameSpec]:
+    # Rule 6 for frames first .. stop - 1.
+    n_frames = stop - first
+    names = [v for _, _, v in segments]
+    times = np.arange(first, stop, dtype=np.float64) / fps
 
     # Rule 6, vectorised: the last transition that started at or before each frame time;
     # inside it the frame is a morph, after it the frame holds that transition's target.
@@ -343,17 +403,6 @@ def sequence(visemes: Timeline, *, fps: float, rest: str, timing: Union[str, Cur
         else:
             v = names[held_index[n]]
             specs.append(FrameSpec(v, v, 0.0))
-
-    # Rule 7: every closure is shown exactly on at least one frame.
-    for i, (s, e, v) in enumerate(segs):
-        if v not in closure_set:
-            continue
-        first = int(math.ceil(s * fps - _EPS))
-        last = int(math.ceil(e * fps - _EPS)) - 1
-        if any(specs[n].shown == v for n in range(max(first, 0), min(last, n_frames - 1) + 1)):
-            continue
-        nearest = min(max(int(round(0.5 * (s + e) * fps)), 0), n_frames - 1)
-        specs[nearest] = FrameSpec(v, v, 0.0)
     return specs
 
 

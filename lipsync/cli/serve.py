@@ -1,0 +1,63 @@
+"""``lipsync serve``: render jobs and live talking heads over HTTP and WebSocket, with a demo page."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from ..render import METHODS
+from ..timing import CURVES, DEFAULT_CURVE
+from ._common import add_bank_option, add_quiet_option, add_store_option
+
+
+def add_parser(sub) -> None:
+    from ..server import (DEFAULT_IDLE_TIMEOUT_S, DEFAULT_MAX_SESSIONS, DEFAULT_MAX_UPLOAD, DEFAULT_QUALITY)
+    from ..server.protocol import FPS_CHOICES
+
+    p = sub.add_parser("serve", help="serve render jobs and live talking heads (HTTP + WebSocket, demo page)",
+                       description="Serve POST /api/render (a timeline or audio to an mp4), the live WebSocket "
+                                   "/ws/live (events in, frames out on the client's clock) and a demo page. "
+                                   "Prints the page's URL, which carries the session token.")
+    add_bank_option(p)
+    p.add_argument("--host", default="127.0.0.1",
+                   help="address to listen on (default: 127.0.0.1, this machine only)")
+    p.add_argument("--port", type=int, default=8765, metavar="N", help="port (default: 8765; 0 picks a free one)")
+    p.add_argument("--max-sessions", type=int, default=DEFAULT_MAX_SESSIONS, metavar="N",
+                   help=f"live sessions at once (default: {DEFAULT_MAX_SESSIONS})")
+    p.add_argument("--idle-timeout", type=float, default=DEFAULT_IDLE_TIMEOUT_S, metavar="S",
+                   help=f"close a live session silent this long (default: {DEFAULT_IDLE_TIMEOUT_S:g} s)")
+    p.add_argument("--max-upload-mb", type=float, default=DEFAULT_MAX_UPLOAD / (1 << 20), metavar="MB",
+                   help=f"largest request body (default: {DEFAULT_MAX_UPLOAD >> 20} MB)")
+    p.add_argument("--fps", type=float, default=25.0, choices=FPS_CHOICES, metavar="N",
+                   help="frame rate of live sessions and render jobs (default: 25)")
+    p.add_argument("--quality", type=int, default=DEFAULT_QUALITY, metavar="Q",
+                   help=f"JPEG/WebP quality of live frames, 10-100 (default: {DEFAULT_QUALITY})")
+    p.add_argument("--workers", type=int, default=None, metavar="N",
+                   help="renderer threads shared by all sessions (default: one per core)")
+    p.add_argument("--method", choices=METHODS.names(), default="flow", help="in-between method (default: flow)")
+    p.add_argument("--map", default=None, metavar="NAME_OR_FILE", help="phoneme-to-viseme map")
+    p.add_argument("--timing", choices=CURVES.names(), default=DEFAULT_CURVE, metavar="NAME",
+                   help=f"transition timing curve (default: {DEFAULT_CURVE})")
+    add_store_option(p)
+    add_quiet_option(p)
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from ..errors import InputError
+    from ..server import ServeConfig, serve
+
+    if not 10 <= args.quality <= 100:
+        raise InputError(f"--quality must be 10..100, got {args.quality}")
+    if args.host not in ("127.0.0.1", "localhost", "::1"):
+        print(f"lipsync serve: warning: listening on {args.host}: other machines can reach this server "
+              f"(the token still guards it)", file=sys.stderr)
+    config = ServeConfig(bank=args.bank, store=args.store, map=args.map, timing=args.timing, method=args.method,
+                         fps=args.fps, quality=args.quality, max_sessions=args.max_sessions,
+                         idle_timeout=args.idle_timeout, max_upload=int(args.max_upload_mb * (1 << 20)),
+                         workers=args.workers, quiet=args.quiet)
+    try:
+        serve(config, host=args.host, port=args.port)
+    except KeyboardInterrupt:
+        pass
+    return 0

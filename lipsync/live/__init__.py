@@ -1,0 +1,15 @@
+"""Live talking heads: frames for a playback clock from events pushed as they arrive.
+
+* :mod:`.causal` — :class:`CausalSequencer`: the sequencer's rules on a growing track,
+  with the look-ahead they imply (:data:`LOOKAHEAD_S`, 380 ms);
+* :mod:`.animator` — :class:`LiveAnimator`: label mapping, thread safety, rendering;
+* :mod:`.pool` — :class:`RendererPool`: renderers shared by many animators.
+
+``lipsync serve`` (:mod:`lipsync.server`) streams these frames to browsers.
+"""
+
+from .animator import LiveAnimator, replay_specs
+from .causal import LOOKAHEAD_S, RELAX_S, CausalSequencer
+from .pool import RendererPool
+
+__all__ = ["LiveAnimator", "replay_specs", "CausalSequencer", "RendererPool", "LOOKAHEAD_S", "RELAX_S"]

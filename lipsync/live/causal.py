@@ -1,0 +1,221 @@
+"""Causal sequencing: the sequencer's rules applied to a viseme track that grows at its end.
+
+:class:`CausalSequencer` takes viseme segments in time order (``extend``) and answers
+"which FrameSpec does frame n show" (``spec``) from what it has been given so far. It does
+not have rules of its own: it calls :func:`lipsync.sequencer.plan_segments`,
+:func:`~lipsync.sequencer.plan_transitions` and :func:`~lipsync.sequencer.frame_specs`,
+the same functions :func:`~lipsync.sequencer.sequence` is made of, on a *window* of the
+track that starts at the last **cut**.
+
+Cuts (why planning a window gives the offline frames)
+-----------------------------------------------------
+The offline sequencer plans the whole track at once; replanning all of it on every push
+would cost O(track length) per push. A cut at time ``c`` inside a long segment ``G``
+(pushed, or a gap, which is rest) splits the track into a frozen past and a window that
+is replanned alone, and the window's frames equal the whole track's when:
+
+* ``G`` is never dropped (rule 4: it is >= MIN_SEGMENT_S, and segments only grow when a
+  neighbour is dropped) nor relabelled (rule 3: a rest >= MAX_HELD_PAUSE_S is not held),
+  so it separates the drops on its left from those on its right: shortest-first dropping
+  decides each side alone. The planned segment containing ``G`` only grows outward.
+* ``c >= G.start + max(MAX_TRANSITION_S / 2, 1 / fps)``: the transition into ``G`` ends by
+  ``G.start + MAX_TRANSITION_S / 2`` (``G`` holds from its midpoint - 40 ms, which is later
+  for a segment >= 200 ms), and a closure just before ``G`` forces at most the frame half a
+  frame after its end (rule 7). Frames from ``c`` on show ``G`` exactly until its
+  transition out.
+* ``G.end - c >= max(MAX_TRANSITION_S + 2 HOLD_HALF_WIDTH_S, MAX_TRANSITION_S / 2 + 1 / fps)``:
+  the window's first segment ``[c, G.end]`` is itself "long" (>= 200 ms), so its transition
+  out starts MAX_TRANSITION_S / 2 before its end, as the whole track's does, and at least
+  one frame of the window shows it (so rule 7 never forces one there).
+
+So the shortest ``G`` that gives a cut is 60 + 200 = 260 ms at 25 fps: pauses between
+phrases and long vowels. Frames before a cut are final as soon as ``G`` is pushed.
+
+Look-ahead
+----------
+Frame ``t`` shows the planned segment around ``t`` or a transition toward the next
+boundary ``b``; a transition starts at most MAX_TRANSITION_S / 2 = 60 ms before ``b`` and
+ends at ``b + 60 ms`` or, when the target is shorter than MAX_TRANSITION_S = 120 ms, at its
+midpoint. The target's planned length is its own plus a pause after it that rule 3 holds
+(a pause < MAX_HELD_PAUSE_S = 200 ms followed by more speech). So what a frame shows is
+settled once the data reaches 60 + 120 + 200 = **380 ms** past it: :data:`LOOKAHEAD_S`.
+Real timelines need less (measured in the tests and ``make bench``: 140-300 ms on the
+samples and the MFA and Gentle files). A run of five or more segments each shorter than
+MIN_SEGMENT_S can in principle reach further, as shortest-first dropping is decided over
+the whole run.
+
+Examples
+--------
+>>> cs = CausalSequencer(fps=10, rest="X")
+>>> cs.extend([(0.0, 0.5, "X"), (0.5, 1.0, "D")])
+>>> [cs.spec(n).shown or "~" for n in range(4, 8)], round(cs.final_until, 2)
+(['X', '~', 'D', 'D'], 0.62)
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Iterable, List, Optional, Tuple
+
+from ..sequencer import (HOLD_HALF_WIDTH_S, MAX_HELD_PAUSE_S, MAX_TRANSITION_S, FrameSpec, check_fps,
+                         frame_count, frame_specs, plan_segments, plan_transitions)
+from ..timeline import VISEME, Segment, Timeline
+from ..timing import DEFAULT_CURVE, get_curve
+
+#: Data needed past a frame's time for the frame to be final (see the module docstring):
+#: a transition starts up to half a transition before its boundary, its end depends on the
+#: target's length up to a full transition, and the target grows by a held pause after it.
+LOOKAHEAD_S = MAX_TRANSITION_S / 2 + MAX_TRANSITION_S + MAX_HELD_PAUSE_S
+
+#: Past the data, the head relaxes as a timeline ends: the frames up to this long after
+#: the last pushed time are planned with trailing silence (the sequencer's own transition
+#: to rest, which reaches rest MAX_TRANSITION_S / 2 after the end); later ones are rest.
+RELAX_S = MAX_HELD_PAUSE_S
+
+# The window's first segment must be "long" in the sequencer's sense (rule hold-long).
+_LONG_S = MAX_TRANSITION_S + 2 * HOLD_HALF_WIDTH_S
+
+# Pushes may overlap the previous one by float noise; the same slack as Timeline's.
+_OVERLAP_TOLERANCE_S = 1e-4
+
+Track = List[Tuple[float, float, str]]
+
+
+class CausalSequencer:
+    """FrameSpecs of a growing viseme track (module docstring); not thread-safe by itself.
+
+    Parameters
+    ----------
+    fps : float
+        Frame rate, 1 to 120. Frame n shows time n / fps.
+    rest : str
+        The rest viseme (gaps, and the head past the data).
+    timing : str or callable
+        Transition timing curve.
+    closures : iterable of str
+        Visemes always shown fully (the map's closures).
+
+    Examples
+    --------
+    >>> cs = CausalSequencer(fps=25, rest="X")
+    >>> cs.spec(100)
+    FrameSpec(from_viseme='X', to_viseme='X', alpha=0.0)
+    """
+
+    def __init__(self, *, fps: float, rest: str, timing=DEFAULT_CURVE, closures: Iterable[str] = ()):
+        self.fps = check_fps(fps)
+        self.rest = rest
+        self.curve = get_curve(timing)
+        self.closures = frozenset(closures)
+        self._lead = max(MAX_TRANSITION_S / 2, 1.0 / self.fps)
+        self._tail = max(_LONG_S, MAX_TRANSITION_S / 2 + 1.0 / self.fps)
+        self._frozen: List[FrameSpec] = []   # frames 0 .. first - 1, final
+        self._cut = 0.0                      # the window starts here (= first / fps)
+        self._raw: Track = []                # pushed segments from the cut on
+        self._horizon = 0.0                  # end of the pushed data
+        self._window: Optional[List[FrameSpec]] = []   # frames first .. frame_count(horizon) - 1
+        self._relax: Optional[List[FrameSpec]] = []    # the next frames, relaxing to rest
+        self._rest_spec = FrameSpec(rest, rest, 0.0)
+        self.cuts = 0
+
+    # ------------------------------------------------------------------ input
+    @property
+    def horizon(self) -> float:
+        """Seconds of track pushed so far (the end of the last segment)."""
+        return self._horizon
+
+    @property
+    def final_until(self) -> float:
+        """Frames at times up to this are final (pushed data reaches LOOKAHEAD_S past them)."""
+        return self._horizon - LOOKAHEAD_S
+
+    def extend(self, segments: Iterable[Tuple[float, float, str]]) -> None:
+        """Append viseme segments ``(start, end, viseme)`` in time order (gaps are rest).
+
+        A segment starting before the end of the track so far (beyond float noise) raises
+        ValueError; one within the noise is clipped to start there.
+        """
+        added = False
+        for start, end, label in segments:
+            start, end = float(start), float(end)
+            if not (math.isfinite(start) and math.isfinite(end)) or end < start or start < 0:
+                raise ValueError(f"segment {start:g}-{end:g} {label!r}: times must be finite, "
+                                 f"0 <= start <= end")
+            if start < self._horizon - _OVERLAP_TOLERANCE_S:
+                raise ValueError(f"segment {start:g}-{end:g} {label!r} starts before the end of the "
+                                 f"track so far ({self._horizon:g} s): push in time order")
+            start = max(start, self._horizon)
+            if end <= start:
+                continue
+            self._raw.append((start, end, label))
+            self._horizon = end
+            added = True
+        if added:
+            self._window = None
+            self._relax = None
+
+    # ------------------------------------------------------------------ output
+    def spec(self, n: int) -> FrameSpec:
+        """The FrameSpec of frame ``n`` (time ``n / fps``) from the track so far."""
+        if n < 0:
+            n = 0
+        if self._window is None:
+            self._advance_cut()
+            self._window = self._plan(self._horizon, self._first, frame_count(self._horizon, self.fps))
+        if n < self._first:
+            return self._frozen[n]
+        stop = self._first + len(self._window)
+        if n < stop:
+            return self._window[n - self._first]
+        if self._relax is None:
+            self._relax = self._plan(self._horizon + RELAX_S, stop, frame_count(self._horizon + RELAX_S, self.fps))
+        if n < stop + len(self._relax):
+            return self._relax[n - stop]
+        return self._rest_spec
+
+    def is_final(self, n: int) -> bool:
+        """True when frame ``n`` cannot change with later pushes (by the look-ahead rule)."""
+        return n < self._first or n / self.fps <= self.final_until
+
+    # ------------------------------------------------------------------ planning
+    @property
+    def _first(self) -> int:
+        return len(self._frozen)
+
+    def _plan(self, total: float, first: int, stop: int) -> List[FrameSpec]:
+        # Frames first .. stop - 1 of the window's track ending at ``total`` (stop is its end).
+        if stop <= first:
+            return []
+        track = Timeline(tuple(Segment(s, e, v) for s, e, v in self._raw), kind=VISEME)
+        segs = plan_segments(track, rest=self.rest, closures=self.closures, duration=total, start=self._cut)
+        windows = plan_transitions(segs)
+        return frame_specs(segs, windows, fps=self.fps, curve=self.curve, closures=self.closures,
+                           first=first, stop=stop)
+
+    def _anchor(self) -> Optional[int]:
+        """The first frame of the latest valid cut in the window (module docstring), if any."""
+        best = None
+        prev_end = self._cut
+        for start, end, _ in self._raw:
+            # the gap before this segment (rest), then the segment itself
+            for g0, g1 in ((prev_end, start), (start, end)):
+                if g1 - g0 < self._lead + self._tail:
+                    continue
+                first = frame_count(g0 + self._lead, self.fps)
+                if first / self.fps > g0 + self._lead - 1e-9 and g1 - first / self.fps >= self._tail \
+                        and first > self._first:
+                    best = first
+            prev_end = end
+        return best
+
+    def _advance_cut(self) -> None:
+        first = self._anchor()
+        if first is None:
+            return
+        # The window's frames before the cut are final (they depend on nothing after G).
+        window = self._plan(self._horizon, self._first, frame_count(self._horizon, self.fps))
+        self._frozen.extend(window[:first - self._first])
+        cut = first / self.fps
+        self._raw = [(max(s, cut), e, v) for s, e, v in self._raw if e > cut]
+        self._cut = cut
+        self.cuts += 1

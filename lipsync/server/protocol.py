@@ -1,0 +1,155 @@
+"""The live WebSocket protocol: client messages parsed and checked, frame messages packed.
+
+Client -> server, text frames holding one JSON object each:
+
+* ``{"type": "config", "fps": 25, "format": "jpeg"|"webp", "quality": 80}`` (optional,
+  before anything else is pushed);
+* ``{"type": "push", "start": 0.1, "end": 0.25, "label": "AA", "kind": "phoneme"}``
+  (``kind`` optional: ``viseme``, ``phoneme`` or ``word``), or
+  ``{"type": "push", "events": [{"start": .., "end": .., "label": ..}, ...]}``;
+* ``{"type": "clock", "t": 1.25}`` -- the client's playback time now; the server
+  extrapolates it in real time until the next clock message;
+* ``{"type": "stop"}`` -- playback paused: no frames until the next clock message;
+* ``{"type": "ping"}`` -- answered with ``{"type": "pong"}``.
+
+Server -> client: text ``{"type": "ready", ...}`` once, ``{"type": "error", "error": ...}``
+for a message it could not use (the session carries on), and binary frames: a 16-byte
+header (``<IId``: frame number, flags -- bit 0 set when the frame is final --, its time in
+seconds) followed by the JPEG or WebP image.
+
+Examples
+--------
+>>> parse('{"type": "clock", "t": 1.5}')
+Clock(t=1.5)
+>>> parse('{"type": "push", "start": 0, "end": 0.2, "label": "M"}')
+Push(events=((0.0, 0.2, 'M', None),))
+>>> parse('{"type": "push", "start": 0}')
+Traceback (most recent call last):
+...
+lipsync.server.protocol.ProtocolError: push: 'end' must be a number
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import struct
+from dataclasses import dataclass
+from typing import Optional, Tuple, Union
+
+from ..errors import InputError
+
+HEADER = struct.Struct("<IId")
+FLAG_FINAL = 1
+
+#: Events in one push message: a long utterance's phones (about 15 a second) fit many
+#: times over, and one message cannot make the server plan minutes of frames at once.
+MAX_EVENTS_PER_MESSAGE = 2000
+#: Longest label: words and phone names are short; this bounds what is kept and echoed.
+MAX_LABEL_CHARS = 64
+#: The frame rates and image formats a session may ask for.
+FPS_CHOICES = (10, 12, 15, 20, 24, 25, 30, 50, 60)
+FORMATS = ("jpeg", "webp")
+
+
+class ProtocolError(InputError):
+    """A client message that cannot be used (answered with an error message)."""
+
+
+@dataclass(frozen=True)
+class Config:
+    fps: Optional[float] = None
+    format: Optional[str] = None
+    quality: Optional[int] = None
+
+
+@dataclass(frozen=True)
+class Push:
+    events: Tuple[Tuple[float, float, str, Optional[str]], ...]
+
+
+@dataclass(frozen=True)
+class Clock:
+    t: float
+
+
+@dataclass(frozen=True)
+class Stop:
+    pass
+
+
+@dataclass(frozen=True)
+class Ping:
+    pass
+
+
+Message = Union[Config, Push, Clock, Stop, Ping]
+
+
+def _number(obj: dict, key: str, what: str) -> float:
+    value = obj.get(key)
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise ProtocolError(f"{what}: {key!r} must be a number")
+    return float(value)
+
+
+def _event(obj, what: str) -> Tuple[float, float, str, Optional[str]]:
+    if not isinstance(obj, dict):
+        raise ProtocolError(f"{what}: an event must be an object with start, end and label")
+    start, end = _number(obj, "start", what), _number(obj, "end", what)
+    label = obj.get("label")
+    if not isinstance(label, str) or len(label) > MAX_LABEL_CHARS:
+        raise ProtocolError(f"{what}: 'label' must be text of at most {MAX_LABEL_CHARS} characters")
+    kind = obj.get("kind")
+    if kind is not None and not isinstance(kind, str):
+        raise ProtocolError(f"{what}: 'kind' must be viseme, phoneme or word")
+    return start, end, label, kind
+
+
+def parse(text: str) -> Message:
+    """One client message (module docstring), or :class:`ProtocolError` saying what is wrong."""
+    try:
+        obj = json.loads(text)
+    except (ValueError, RecursionError):
+        raise ProtocolError("not a JSON message") from None
+    if not isinstance(obj, dict):
+        raise ProtocolError("a message must be a JSON object with a 'type'")
+    kind = obj.get("type")
+    if kind == "clock":
+        return Clock(_number(obj, "t", "clock"))
+    if kind == "push":
+        if "events" in obj:
+            events = obj["events"]
+            if not isinstance(events, list) or not 0 < len(events) <= MAX_EVENTS_PER_MESSAGE:
+                raise ProtocolError(f"push: 'events' must be a list of 1 to {MAX_EVENTS_PER_MESSAGE} events")
+            return Push(tuple(_event(e, f"push event {i}") for i, e in enumerate(events)))
+        return Push((_event(obj, "push"),))
+    if kind == "config":
+        fps = obj.get("fps")
+        if fps is not None and fps not in FPS_CHOICES:
+            raise ProtocolError(f"config: fps must be one of {', '.join(map(str, FPS_CHOICES))}")
+        fmt = obj.get("format")
+        if fmt is not None and fmt not in FORMATS:
+            raise ProtocolError(f"config: format must be one of {', '.join(FORMATS)}")
+        quality = obj.get("quality")
+        if quality is not None and (isinstance(quality, bool) or not isinstance(quality, int)
+                                    or not 10 <= quality <= 100):
+            raise ProtocolError("config: quality must be an integer 10..100")
+        return Config(None if fps is None else float(fps), fmt, quality)
+    if kind == "stop":
+        return Stop()
+    if kind == "ping":
+        return Ping()
+    raise ProtocolError(f"unknown message type {str(kind)[:20]!r}; valid: config, push, clock, stop, ping")
+
+
+def pack_frame(n: int, t: float, final: bool, image: bytes) -> bytes:
+    """A frame message: the header (module docstring) and the encoded image.
+
+    Examples
+    --------
+    >>> msg = pack_frame(7, 0.28, True, b"JPEG")
+    >>> HEADER.unpack(msg[:HEADER.size]), msg[HEADER.size:]
+    ((7, 1, 0.28), b'JPEG')
+    """
+    return HEADER.pack(n, FLAG_FINAL if final else 0, t) + image
