@@ -101,6 +101,16 @@ class LocalBank:
     folder: Path
     installed: Set[str] = field(default_factory=set)
     lock: threading.Lock = field(default_factory=threading.Lock)
+    _normalised: object = None
+
+    def normalised(self):
+        """The bank normalised (:func:`lipsync.normalise.normalise`), once per process."""
+        from ..normalise import normalise
+
+        with self.lock:
+            if self._normalised is None:
+                self._normalised = normalise(self.bank, cache=self.store)
+            return self._normalised
 
 
 _LOADED: "OrderedDict[Tuple[str, str], LocalBank]" = OrderedDict()

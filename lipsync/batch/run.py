@@ -163,8 +163,11 @@ def connect(workers: Optional[int] = None, scheduler: Optional[str] = None) -> I
     n = workers if workers is not None else (os.cpu_count() or 1)
     if n < 1:
         raise InputError(f"--workers must be at least 1, got {n}")
+    # The scheduler always serves HTTP (health, metrics): on 127.0.0.1 at a free port, not on
+    # the dashboard's 8787 (taken by any other cluster on the machine); no dashboard pages.
     with LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
-                      dashboard_address=None, silence_logs=logging.ERROR) as cluster, \
+                      dashboard_address="127.0.0.1:0", scheduler_kwargs={"dashboard": False},
+                      silence_logs=logging.ERROR) as cluster, \
             Client(cluster, set_as_default=False) as client:
         yield client, f"LocalCluster {cluster.scheduler_address} ({n} worker process{'es' if n > 1 else ''})"
 

@@ -61,12 +61,11 @@ class ClipTask:
 
 def pair_task(pack: BankPack, a: str, b: str, cache: Optional[str] = None) -> Tuple[str, bytes]:
     """Flows of the pair (a, b) of ``pack``'s bank: ``(store key, entry bytes)``."""
-    from ..normalise import normalise
     from ..preprocess import _compute_pair
 
     local = local_bank(pack, cache)
     bank, store = local.bank, local.store
-    nb = normalise(bank, cache=store)
+    nb = local.normalised()
     key = store.pair_key(bank, a, b, nb.axis)
     if store.load_pair(key, bank.shape) is None:
         _compute_pair(str(store.root), key, bank.shape, nb.lines[a], nb.lines[b],
