@@ -148,6 +148,7 @@ def connect(workers: Optional[int] = None, scheduler: Optional[str] = None) -> I
     already keeps two threads and an ffmpeg process busy) and is shut down, workers and
     ports included, when the block ends, also on errors and Ctrl-C.
     """
+    import dask
     from distributed import Client, LocalCluster
 
     if scheduler is not None:
@@ -165,10 +166,15 @@ def connect(workers: Optional[int] = None, scheduler: Optional[str] = None) -> I
         raise InputError(f"--workers must be at least 1, got {n}")
     # The scheduler always serves HTTP (health, metrics): on 127.0.0.1 at a free port, not on
     # the dashboard's 8787 (taken by any other cluster on the machine); no dashboard pages.
-    with LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
-                      dashboard_address="127.0.0.1:0", scheduler_kwargs={"dashboard": False},
-                      silence_logs=logging.ERROR) as cluster, \
-            Client(cluster, set_as_default=False) as client:
+    # Worker processes start without dask's MALLOC_TRIM_THRESHOLD_: setting it turns off
+    # glibc's adaptive mmap threshold, so every frame-sized temporary is mmapped and
+    # page-faulted afresh; measured here, it costs a clip +34% CPU and up to twice the wall
+    # time (docs/scaling.md). Dask's one-thread OpenMP/BLAS settings stay.
+    with dask.config.set({"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}):
+        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
+                               dashboard_address="127.0.0.1:0", scheduler_kwargs={"dashboard": False},
+                               silence_logs=logging.ERROR)
+    with cluster, Client(cluster, set_as_default=False) as client:
         yield client, f"LocalCluster {cluster.scheduler_address} ({n} worker process{'es' if n > 1 else ''})"
 
 

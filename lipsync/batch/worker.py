@@ -67,7 +67,10 @@ def pair_task(pack: BankPack, a: str, b: str, cache: Optional[str] = None) -> Tu
     bank, store = local.bank, local.store
     nb = local.normalised()
     key = store.pair_key(bank, a, b, nb.axis)
-    if store.load_pair(key, bank.shape) is None:
+    # An entry already on this machine (an earlier batch) is shipped as it is, unchecked:
+    # every store checks each entry it reads, so a damaged one becomes a miss wherever it
+    # lands and is recomputed there. Checking here too would cost a decode per pair.
+    if not store.pair_path(key).is_file():
         _compute_pair(str(store.root), key, bank.shape, nb.lines[a], nb.lines[b],
                       (bank.warp.a, bank.warp.b, bank.warp.p), bank.line_names, nb.axis, (a, b))
     with local.lock:

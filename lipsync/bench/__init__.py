@@ -79,7 +79,7 @@ def peak_mb(fn: Callable[[], object]) -> float:
 
 def _table(rows: List[dict]) -> str:
     lines = []
-    for fig in ("beier_neely_field", "frame", "end_to_end", "store"):
+    for fig in dict.fromkeys(r["figure"] for r in rows):  # every figure, in the order measured
         sel = [r for r in rows if r["figure"] == fig]
         if not sel:
             continue
