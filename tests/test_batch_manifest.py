@@ -2,6 +2,7 @@
 
 import json
 import os
+import socket
 from pathlib import Path
 
 import numpy as np
@@ -219,3 +220,21 @@ def test_shipped_store_entries_are_installed_once_and_damage_is_a_miss(tmp_path,
     install_entries(third, [(key, bytes(bad))])
     with pytest.warns(UserWarning, match="unusable flow store entry"):
         assert third.store.get_pair(third.bank, a, b) is None
+
+
+def test_scheduler_address_checked_and_unreachable_scheduler_is_an_error(folder, monkeypatch, capsys):
+    from lipsync.batch import run
+
+    manifest = write(folder / "m.csv", "input,output\nin/a.tsv,a.mp4\n")
+    assert main(["batch", str(manifest), "-o", str(folder / "o"), "--scheduler", "127.0.0.1:8786"]) == 2
+    assert "tcp://HOST:PORT" in capsys.readouterr().err
+    monkeypatch.setattr(run, "CONNECT_TIMEOUT_S", 1)
+    with socket.socket() as s:  # a port nobody listens on
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    assert main(["batch", str(manifest), "-o", str(folder / "o"), "--scheduler", f"tcp://127.0.0.1:{port}",
+                 "--quiet"]) == 1
+    assert f"cannot reach the dask scheduler at tcp://127.0.0.1:{port}" in capsys.readouterr().err
+    report = json.loads((folder / "o" / "lipsync-batch-report.json").read_text())
+    assert [c["status"] for c in report["clips"]] == ["not run"]
+    assert not (folder / "o" / "a.mp4").exists()

@@ -169,11 +169,13 @@ def connect(workers: Optional[int] = None, scheduler: Optional[str] = None) -> I
     # Worker processes start without dask's MALLOC_TRIM_THRESHOLD_: setting it turns off
     # glibc's adaptive mmap threshold, so every frame-sized temporary is mmapped and
     # page-faulted afresh; measured here, it costs a clip +34% CPU and up to twice the wall
-    # time (docs/scaling.md). Dask's one-thread OpenMP/BLAS settings stay.
+    # time (docs/scaling.md). Dask's one-thread OpenMP/BLAS settings stay. Its own logs are
+    # silenced: a heartbeat racing the shutdown is logged as an error, and what matters to
+    # the user (a clip failed, a worker died) is in the report.
     with dask.config.set({"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}):
         cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
                                dashboard_address="127.0.0.1:0", scheduler_kwargs={"dashboard": False},
-                               silence_logs=logging.ERROR)
+                               silence_logs=logging.CRITICAL)
     with cluster, Client(cluster, set_as_default=False) as client:
         yield client, f"LocalCluster {cluster.scheduler_address} ({n} worker process{'es' if n > 1 else ''})"
 
