@@ -131,6 +131,7 @@ def _batch(root, out, address, *extra):
                  "--cache", str(root / "cache"), "--quiet", *extra])
 
 
+@pytest.mark.slow
 def test_batch_equals_render_frame_for_frame_and_resumes(cluster, project, tmp_path):
     address, client, worker_pids = cluster
     root, bank, rows = project
@@ -161,7 +162,7 @@ def test_batch_equals_render_frame_for_frame_and_resumes(cluster, project, tmp_p
         if name == "broken.mp4":
             continue
         ref = tmp_path / name.replace("/", "_")
-        args = ["render", str(root / inp), "-o", str(ref), "--bank", str(bank), "--quiet"]
+        args = ["render", str(root / inp), "-o", str(ref), "--bank", str(bank), "--quiet", "--jobs", "1"]
         for opt in ("fps", "map", "timing", "method"):
             if opt in extra:
                 args += [f"--{opt}", str(root / extra[opt]) if opt == "map" else extra[opt]]
@@ -210,27 +211,53 @@ def test_batch_equals_render_frame_for_frame_and_resumes(cluster, project, tmp_p
     assert np.array_equal(decode(out / "a.mp4"), decode(tmp_path / "a.mp4"))
 
 
-def test_cli_default_local_cluster_leaves_no_processes_or_ports(tmp_path):
-    """The default path: ``lipsync batch`` starts its own LocalCluster and shuts it down."""
-    write_tsv(tmp_path / "a.tsv", CUES_A, 1.6)
+@pytest.mark.slow
+def test_default_cluster_ctrl_c_stops_cleanly_leaving_whole_outputs_no_processes_or_ports(tmp_path):
+    """``lipsync batch`` on its own LocalCluster, then Ctrl-C (SIGINT to the whole process
+    group, as a terminal sends it) mid-batch."""
+    import signal
+    import time
+
     bank = synthetic.write_bank(tmp_path / "bank", synthetic.RHUBARB_SHAPES)
-    (tmp_path / "m.jsonl").write_text(json.dumps({"input": "a.tsv", "output": "a.mp4", "fps": 10,
-                                                  "bank": str(bank)}) + "\n")
+    rows = []
+    for i in range(12):
+        write_tsv(tmp_path / f"c{i}.tsv", CUES_A, 1.6 + 0.1 * i)
+        rows.append(json.dumps({"input": f"c{i}.tsv", "output": f"c{i}.mp4", "bank": str(bank)}))
+    (tmp_path / "m.jsonl").write_text("\n".join(rows) + "\n")
+    out = tmp_path / "out"
     tag = uuid.uuid4().hex
-    env = dict(os.environ, LIPSYNC_TEST_TAG=tag)
-    r = subprocess.run([sys.executable, "-m", "lipsync", "batch", str(tmp_path / "m.jsonl"), "-o",
-                        str(tmp_path / "out"), "--workers", "2", "--cache", str(tmp_path / "cache")],
-                       capture_output=True, text=True, env=env, timeout=300)
-    assert r.returncode == 0, r.stderr
-    assert "1 clips: 1 done, 0 skipped, 0 failed" in r.stderr
-    address = r.stderr.split("ran on LocalCluster ")[1].split()[0]
+    p = subprocess.Popen([sys.executable, "-m", "lipsync", "batch", str(tmp_path / "m.jsonl"), "-o", str(out),
+                          "--workers", "2", "--cache", str(tmp_path / "cache")],
+                         env=dict(os.environ, LIPSYNC_TEST_TAG=tag), stderr=subprocess.PIPE, text=True,
+                         start_new_session=True)
+    try:
+        deadline = time.monotonic() + 120
+        while not list(out.glob("*.lipsync.json")) and time.monotonic() < deadline and p.poll() is None:
+            time.sleep(0.02)
+        os.killpg(p.pid, signal.SIGINT)
+        err = p.communicate(timeout=120)[1]
+    finally:
+        if p.poll() is None:
+            os.killpg(p.pid, signal.SIGKILL)
+    assert p.returncode == 130, err
+    assert "Traceback" not in err and "interrupted" in err
+    address = err.split(" clips to render on LocalCluster ")[1].split()[0]
     assert address.startswith("tcp://127.0.0.1:") and _refused(address)
+    report = json.loads((out / "lipsync-batch-report.json").read_text())
+    status = {c["output"]: c["status"] for c in report["clips"]}
+    done = sorted(n for n, s in status.items() if s == "done")
+    assert done and "not run" in status.values()
+    # only whole videos, each with its sidecar; no temporary files
+    assert sorted(x.name for x in out.glob("*.mp4")) == done
+    for name in done:
+        side = json.loads((out / (name + ".lipsync.json")).read_text())
+        assert decode(out / name).shape[0] == side["frames"] > 0
+    assert not [x for x in out.iterdir() if x.name.startswith(".tmp")]
     left = []
-    for p in psutil.process_iter():
+    for q in psutil.process_iter():
         try:
-            if p.environ().get("LIPSYNC_TEST_TAG") == tag:
-                left.append(p)
+            if q.environ().get("LIPSYNC_TEST_TAG") == tag:
+                left.append(q)
         except (psutil.AccessDenied, psutil.NoSuchProcess, psutil.ZombieProcess):
             pass
     assert not left, f"processes left behind: {left}"
-    assert decode(tmp_path / "out" / "a.mp4").shape[0] == 16

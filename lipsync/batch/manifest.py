@@ -233,6 +233,8 @@ def read_manifest(path: PathLike, outdir: Optional[PathLike] = None) -> List[Cli
         raise InputError("is a folder, not a manifest", path=path) from None
     except UnicodeDecodeError as exc:
         raise InputError(f"not UTF-8 text (byte {exc.start})", path=path) from None
+    except OSError as exc:
+        raise InputError(f"cannot read: {exc.strerror or exc}", path=path) from None
     base = path.resolve().parent
     out_real = Path(outdir).resolve() if outdir is not None else None
     rows = _rows(path, text)
@@ -266,12 +268,15 @@ def read_manifest(path: PathLike, outdir: Optional[PathLike] = None) -> List[Cli
         for name in REQUIRED:
             if field(name) is None:
                 errs.append(f"missing {name!r}")
-        inp = field("input")
-        input_path = None
-        if inp is not None:
-            input_path = local(inp)
-            if not input_path.is_file():
-                errs.append(f"input {inp!r}: no such file")
+        def existing_file(name: str) -> Optional[Path]:
+            value = field(name)
+            if value is None:
+                return None
+            if not local(value).is_file():
+                errs.append(f"{name} {value!r}: no such file")
+            return local(value)
+
+        input_path = existing_file("input")
         out = field("output")
         out_name = None
         if out is not None:
@@ -310,12 +315,7 @@ def read_manifest(path: PathLike, outdir: Optional[PathLike] = None) -> List[Cli
         text_file = None
         if text_value is not None and local(text_value).is_file():
             text_file, text_value = local(text_value), None
-        audio = field("audio")
-        audio_path = None
-        if audio is not None:
-            audio_path = local(audio)
-            if not audio_path.is_file():
-                errs.append(f"audio {audio!r}: no such file")
+        audio_path = existing_file("audio")
 
         fps = 25.0
         if field("fps") is not None:

@@ -25,6 +25,7 @@ import json
 import logging
 import os
 import re
+import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -141,6 +142,27 @@ def _write_report(path: Path, report: BatchReport) -> None:
 
 
 @contextlib.contextmanager
+def _workers_ignore_ctrl_c() -> Iterator[None]:
+    """Start processes with SIGINT ignored (inherited through exec; Python keeps it so).
+
+    Ctrl-C in a terminal reaches the whole process group: without this every worker
+    prints a KeyboardInterrupt traceback while this process is already shutting the
+    cluster down in order.
+    """
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
+@contextlib.contextmanager
 def connect(workers: Optional[int] = None, scheduler: Optional[str] = None) -> Iterator[Tuple[object, str]]:
     """A dask ``Client``: on a new LocalCluster of ``workers`` processes, or on ``scheduler``.
 
@@ -172,7 +194,8 @@ def connect(workers: Optional[int] = None, scheduler: Optional[str] = None) -> I
     # time (docs/scaling.md). Dask's one-thread OpenMP/BLAS settings stay. Its own logs are
     # silenced: a heartbeat racing the shutdown is logged as an error, and what matters to
     # the user (a clip failed, a worker died) is in the report.
-    with dask.config.set({"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}):
+    with dask.config.set({"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}), \
+            _workers_ignore_ctrl_c():
         cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
                                dashboard_address="127.0.0.1:0", scheduler_kwargs={"dashboard": False},
                                silence_logs=logging.CRITICAL)
@@ -268,6 +291,9 @@ def run_batch(manifest: PathLike, outdir: PathLike, *, workers: Optional[int] = 
         if todo:
             with connect(workers, scheduler) as (client, cluster):
                 batch.cluster = cluster
+                if not quiet:
+                    bar.write(f"lipsync batch: {len(todo)} of {len(jobs)} clips to render on {cluster}",
+                              file=sys.stderr)
                 _execute(client, jobs, todo, keys, packs, results, outdir, cache, bar)
     finally:
         bar.close()

@@ -39,8 +39,6 @@ def run(args: argparse.Namespace) -> int:
     report = run_batch(args.manifest, args.output, workers=args.workers, scheduler=args.scheduler,
                        report=args.report, cache=args.cache, quiet=args.quiet)
     if not args.quiet:
-        if report.cluster:
-            print(f"lipsync batch: ran on {report.cluster}", file=sys.stderr)
         for c in report.clips:
             if c.status == "failed":
                 print(f"lipsync batch: failed: {c.output} (line {c.line}): {c.error}", file=sys.stderr)
