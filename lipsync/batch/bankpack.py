@@ -87,7 +87,13 @@ def pack_bank(folder) -> BankPack:
 
 
 def default_cache_dir() -> Path:
-    """Where a worker keeps unpacked banks and flows: ``$XDG_CACHE_HOME/lipsync/batch``."""
+    """Where a worker keeps unpacked banks and flows: ``$XDG_CACHE_HOME/lipsync/batch``.
+
+    Examples
+    --------
+    >>> default_cache_dir().parts[-2:]
+    ('lipsync', 'batch')
+    """
     base = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
     return base / "lipsync" / "batch"
 
@@ -193,6 +199,20 @@ def install_entries(local: LocalBank, entries) -> int:
     writes them deterministically), so installing is a file write; a damaged one is a
     store miss later (the store checks every entry it reads) and is recomputed, never used.
     Returns the number written.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> from lipsync._data import default_bank_dir
+    >>> from lipsync.batch.worker import pair_task
+    >>> pack = pack_bank(default_bank_dir())
+    >>> a, b = pack.names[:2]                                         # a pair, in bank order
+    >>> entry = pair_task(pack, a, b, tempfile.mkdtemp())             # computed on one machine
+    >>> there = local_bank(pack, tempfile.mkdtemp())                  # another machine's cache
+    >>> install_entries(there, [entry]), install_entries(there, [entry])
+    (1, 0)
+    >>> there.store.get_pair(there.bank, a, b) is not None
+    True
     """
     from ..store import atomic_write_bytes
 
@@ -210,6 +230,12 @@ def install_entries(local: LocalBank, entries) -> int:
 
 
 def loaded_banks() -> Dict[Tuple[str, str], LocalBank]:
-    """The banks this process holds (for tests and diagnostics)."""
+    """The banks this process holds, by (cache folder, digest), for tests and diagnostics.
+
+    Examples
+    --------
+    >>> isinstance(loaded_banks(), dict)
+    True
+    """
     with _LOADED_LOCK:
         return dict(_LOADED)

@@ -169,6 +169,12 @@ def connect(workers: Optional[int] = None, scheduler: Optional[str] = None) -> I
     The LocalCluster binds 127.0.0.1 only, has no dashboard, one thread per worker (a clip
     already keeps two threads and an ffmpeg process busy) and is shut down, workers and
     ports included, when the block ends, also on errors and Ctrl-C.
+
+    Examples
+    --------
+    >>> with connect(workers=2) as (client, where):                   # doctest: +SKIP
+    ...     print(where, sum(client.nthreads().values()))
+    LocalCluster tcp://127.0.0.1:40123 (2 worker processes) 2
     """
     import dask
     from distributed import Client, LocalCluster

@@ -24,7 +24,16 @@ _CHUNK = 1 << 20
 
 
 def file_sha256(path: os.PathLike) -> str:
-    """sha256 of a file's bytes (read in 1 MB chunks)."""
+    """sha256 of a file's bytes (read in 1 MB chunks).
+
+    Examples
+    --------
+    >>> import os, tempfile
+    >>> p = os.path.join(tempfile.mkdtemp(), "f")
+    >>> _ = open(p, "wb").write(b"abc")
+    >>> file_sha256(p)[:16]
+    'ba7816bf8f01cfea'
+    """
     h = hashlib.sha256()
     with open(path, "rb") as fh:
         for chunk in iter(lambda: fh.read(_CHUNK), b""):
@@ -68,11 +77,27 @@ def clip_key(job: ClipJob, bank_digest: str) -> str:
 
 
 def sidecar_path(output: Path) -> Path:
+    """The sidecar beside ``output``.
+
+    Examples
+    --------
+    >>> sidecar_path(Path("out/a.mp4")).as_posix()
+    'out/a.mp4.lipsync.json'
+    """
     return output.with_name(output.name + SIDECAR_SUFFIX)
 
 
 def read_done(output: Path, key: str) -> Optional[dict]:
-    """The sidecar of ``output`` if it vouches for the current file and ``key``; else None."""
+    """The sidecar of ``output`` if it vouches for the current file and ``key``; else None.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> out = Path(tempfile.mkdtemp()) / "a.mp4"
+    >>> write_done(out, b"video", "k" * 64, {"frames": 5})
+    >>> read_done(out, "k" * 64)["frames"], read_done(out, "j" * 64)
+    (5, None)
+    """
     try:
         meta = json.loads(sidecar_path(output).read_text(encoding="utf-8"))
         if not isinstance(meta, dict) or meta.get("key") != key:

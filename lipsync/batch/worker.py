@@ -60,7 +60,21 @@ class ClipTask:
 
 
 def pair_task(pack: BankPack, a: str, b: str, cache: Optional[str] = None) -> Tuple[str, bytes]:
-    """Flows of the pair (a, b) of ``pack``'s bank: ``(store key, entry bytes)``."""
+    """Flows of the pair (a, b) of ``pack``'s bank, a before b in bank order: ``(store key, entry bytes)``.
+
+    Computed into this machine's store under ``cache`` unless an earlier batch left the
+    entry there.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> from lipsync._data import default_bank_dir
+    >>> from lipsync.batch import pack_bank
+    >>> pack = pack_bank(default_bank_dir())
+    >>> key, data = pair_task(pack, pack.names[0], pack.names[1], tempfile.mkdtemp())
+    >>> len(key), data[:2]
+    (64, b'PK')
+    """
     from ..preprocess import _compute_pair
 
     local = local_bank(pack, cache)
@@ -80,7 +94,34 @@ def pair_task(pack: BankPack, a: str, b: str, cache: Optional[str] = None) -> Tu
 
 def clip_task(task: ClipTask, pack: BankPack, entries: List[Tuple[str, bytes]],
               cache: Optional[str] = None) -> dict:
-    """Render one clip; returns ``{"ok": True, "data": mp4 bytes, ...}`` or ``{"ok": False, "error": ...}``."""
+    """Render one clip; returns ``{"ok": True, "data": mp4 bytes, ...}`` or ``{"ok": False, "error": ...}``.
+
+    Parameters
+    ----------
+    task : ClipTask
+        Options and input files.
+    pack : BankPack
+        The bank.
+    entries : list of (str, bytes)
+        The bank's flow store entries (the results of its :func:`pair_task` tasks).
+    cache : str, optional
+        This machine's cache folder.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> from lipsync._data import default_bank_dir
+    >>> from lipsync.batch import pack_bank
+    >>> from lipsync.preprocess import all_pairs
+    >>> pack, cache = pack_bank(default_bank_dir()), tempfile.mkdtemp()
+    >>> entries = [pair_task(pack, a, b, cache) for a, b in all_pairs(pack.names)]  # doctest: +SKIP
+    >>> cues = b"0.00\\tX\\n0.40\\tD\\n0.80\\tX\\n"
+    >>> task = ClipTask(line=2, output="a.mp4", files={"input": ("a.tsv", cues, "a.tsv")}, text=None,
+    ...                 fps=25.0, map="english-to-rhubarb", timing="linear", method="flow")
+    >>> result = clip_task(task, pack, entries, cache)                               # doctest: +SKIP
+    >>> result["ok"], result["frames"], result["data"][4:8]                          # doctest: +SKIP
+    (True, 20, b'ftyp')
+    """
     from .. import __version__
     from ..clip import render_clip
 
