@@ -3,6 +3,8 @@
 import json
 import os
 import socket
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -238,3 +240,18 @@ def test_scheduler_address_checked_and_unreachable_scheduler_is_an_error(folder,
     report = json.loads((folder / "o" / "lipsync-batch-report.json").read_text())
     assert [c["status"] for c in report["clips"]] == ["not run"]
     assert not (folder / "o" / "a.mp4").exists()
+
+
+def test_work_folders_of_dead_workers_are_removed(tmp_path):
+    from lipsync.batch import worker
+
+    tmp = tmp_path / "tmp"
+    tmp.mkdir()
+    dead = subprocess.Popen([sys.executable, "-c", "pass"])
+    dead.wait()
+    (tmp / f"clip-{dead.pid}-abc").mkdir()
+    (tmp / f"clip-{dead.pid}-abc" / "out.mp4").write_bytes(b"half")
+    (tmp / f"clip-{os.getpid()}-live").mkdir()  # a live process's folder stays
+    fresh = worker._work_folder(tmp_path)
+    assert fresh.parent == tmp and fresh.name.startswith(f"clip-{os.getpid()}-")
+    assert sorted(p.name for p in tmp.iterdir()) == sorted([f"clip-{os.getpid()}-live", fresh.name])

@@ -59,6 +59,30 @@ class ClipTask:
     method: str
 
 
+_WORK_PREFIX = "clip-"
+_cleaned: set = set()
+
+
+def _work_folder(cache_dir: Path) -> Path:
+    """A fresh temporary folder for one clip, under ``cache/tmp``.
+
+    Named after this process, so that the first clip of each process can remove what
+    killed workers left behind (folders whose process no longer exists).
+    """
+    tmp = cache_dir / "tmp"
+    tmp.mkdir(parents=True, exist_ok=True)
+    if str(tmp) not in _cleaned:
+        _cleaned.add(str(tmp))
+        for p in tmp.glob(f"{_WORK_PREFIX}*"):
+            try:
+                os.kill(int(p.name[len(_WORK_PREFIX):].split("-")[0]), 0)
+            except (ValueError, ProcessLookupError):
+                shutil.rmtree(p, ignore_errors=True)
+            except PermissionError:  # another user's live process
+                pass
+    return Path(tempfile.mkdtemp(prefix=f"{_WORK_PREFIX}{os.getpid()}-", dir=tmp))
+
+
 def pair_task(pack: BankPack, a: str, b: str, cache: Optional[str] = None) -> Tuple[str, bytes]:
     """Flows of the pair (a, b) of ``pack``'s bank, a before b in bank order: ``(store key, entry bytes)``.
 
@@ -133,8 +157,7 @@ def clip_task(task: ClipTask, pack: BankPack, entries: List[Tuple[str, bytes]],
     try:
         local = local_bank(pack, cache_dir)
         install_entries(local, entries)
-        (cache_dir / "tmp").mkdir(parents=True, exist_ok=True)
-        work = Path(tempfile.mkdtemp(prefix="clip-", dir=cache_dir / "tmp"))
+        work = _work_folder(cache_dir)
         paths: Dict[str, str] = {}
         for role, (name, data, client_path) in task.files.items():
             p = work / role / name
