@@ -230,6 +230,9 @@ def test_scheduler_address_checked_and_unreachable_scheduler_is_an_error(folder,
     manifest = write(folder / "m.csv", "input,output\nin/a.tsv,a.mp4\n")
     assert main(["batch", str(manifest), "-o", str(folder / "o"), "--scheduler", "127.0.0.1:8786"]) == 2
     assert "tcp://HOST:PORT" in capsys.readouterr().err
+    assert main(["batch", str(manifest), "-o", str(folder / "o"), "--workers", "0"]) == 2
+    assert "--workers must be at least 1" in capsys.readouterr().err
+    assert not (folder / "o").exists()  # refused before anything was written
     monkeypatch.setattr(run, "CONNECT_TIMEOUT_S", 1)
     with socket.socket() as s:  # a port nobody listens on
         s.bind(("127.0.0.1", 0))

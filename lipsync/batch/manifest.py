@@ -28,7 +28,7 @@ PathLike = Union[str, "os.PathLike[str]"]
 
 #: The fields a row may have, and why each is there.
 FIELDS = {
-    "input": "timeline file (any reader's format), or audio once an audio reader exists",
+    "input": "timeline file in any format a reader takes (audio too, where a reader takes it, with text)",
     "output": "file name under OUTDIR (.mp4, .mov, .mkv); subfolders allowed",
     "bank": "viseme bank folder (default: the shipped toon)",
     "text": "transcript for audio input: the text itself, or a file holding it",

@@ -267,6 +267,10 @@ def run_batch(manifest: PathLike, outdir: PathLike, *, workers: Optional[int] = 
     from tqdm import tqdm
 
     t0 = time.perf_counter()
+    if workers is not None and workers < 1:
+        raise InputError(f"--workers must be at least 1, got {workers}")
+    if scheduler is not None and not _ADDRESS.match(scheduler):
+        raise InputError(f"--scheduler wants an address like tcp://HOST:PORT, got {scheduler!r}")
     outdir = Path(outdir)
     jobs = read_manifest(manifest, outdir)
     report_path = Path(report) if report is not None else outdir / DEFAULT_REPORT
