@@ -263,3 +263,19 @@ def test_default_cluster_ctrl_c_stops_cleanly_leaving_whole_outputs_no_processes
         except (psutil.AccessDenied, psutil.NoSuchProcess, psutil.ZombieProcess):
             pass
     assert not left, f"processes left behind: {left}"
+
+
+def test_worker_with_another_version_fails_its_clips_clearly(cluster, tmp_path, monkeypatch):
+    import lipsync
+
+    address = cluster[0]
+    bank = synthetic.write_bank(tmp_path / "bank", synthetic.RHUBARB_SHAPES)
+    write_tsv(tmp_path / "a.tsv", CUES_B, 1.4)
+    (tmp_path / "m.csv").write_text(f"input,output,bank\na.tsv,a.mp4,{bank}\n")
+    monkeypatch.setattr(lipsync, "__version__", "0.0.0-client")  # this client, not the workers
+    assert main(["batch", str(tmp_path / "m.csv"), "-o", str(tmp_path / "out"), "--scheduler", address,
+                 "--cache", str(tmp_path / "cache"), "--quiet"]) == 1
+    report = json.loads((tmp_path / "out" / "lipsync-batch-report.json").read_text())
+    [clip] = report["clips"]
+    assert clip["status"] == "failed" and "this client 0.0.0-client" in clip["error"]
+    assert not (tmp_path / "out" / "a.mp4").exists()
