@@ -4,7 +4,7 @@ VENV    := .venv
 BIN     := $(VENV)/bin
 STAMP   := $(VENV)/.installed
 
-.PHONY: test demo bench fuzz docs-images clean install
+.PHONY: test test-browser demo bench fuzz docs-images clean install
 
 $(STAMP): pyproject.toml setup.py
 	$(PY) -m venv $(VENV)
@@ -24,6 +24,13 @@ demo: $(STAMP)
 bench: $(STAMP)
 	$(BIN)/python -m lipsync.bench
 
+# The editor in real headless Chromium (also part of `make test` when chromium is present).
+# Installs Debian's chromium and chromium-driver first, only if they are missing.
+test-browser: $(STAMP)
+	@if [ ! -x /usr/bin/chromium ] || [ ! -x /usr/bin/chromedriver ]; then \
+		apt-get update && apt-get install -y chromium chromium-driver; fi
+	$(BIN)/python -m pytest -q -s -p no:cacheprovider tests/test_browser_editor.py
+
 fuzz: $(STAMP)
 	HYPOTHESIS_PROFILE=fuzz $(BIN)/python -m pytest -q -p no:cacheprovider tests/test_fuzz.py
 
@@ -34,3 +41,4 @@ clean:
 docs-images: $(STAMP)
 	$(BIN)/lipsync morph visemes/toon X D --frames 5 -o docs/strip.png
 	$(BIN)/lipsync preview visemes/toon -o docs/preview.png
+	$(BIN)/python -m lipsync.editor.browser visemes/toon docs/editor.png

@@ -4,7 +4,25 @@ Loading validates everything a later stage relies on, so that preprocessing and 
 never meet a bad bank: the same line names in every viseme, readable images of one size,
 no zero-length line, an existing rest viseme, mirror partners when ``symmetry: true``,
 image paths inside the bank folder. Errors are :class:`~lipsync.errors.BankError` naming
-the file, the YAML line, the viseme and the control line.
+the file, the YAML line, the viseme and the control line (also as the attributes
+``viseme`` and ``feature`` of the error, for the editor).
+
+Features: a control feature in ``lines`` is one of
+
+* a line, ``name: [[Px, Py], [Qx, Qy]]`` (as always);
+* a polyline, ``name: {polyline: [[x, y], ...], segments: N}``;
+* a cubic Bézier, ``name: {bezier: [P0, C1, C2, P1, C3, C4, P2, ...], segments: N}``
+  (3k+1 control points: k cubic pieces joined end to end).
+
+Curves are expanded into ``segments`` line segments named ``name#0 .. name#N-1`` with
+*correspondence by arc length*: segment i runs between the points at arc length i/N and
+(i+1)/N of the whole curve, so the same fraction of a curve corresponds across visemes
+however its control points are spaced. Without ``segments`` a Bézier gets
+:data:`BEZIER_SEGMENTS_PER_PIECE` per piece and a polyline keeps its own edges (vertex i
+matches vertex i). Every viseme must give a feature the same number of segments. Mirror
+partners work for curves as for lines: ``mouth_l#i`` pairs with ``mouth_r#i``; a curve
+without ``_l``/``_r`` crossing the axis pairs its segment i with segment N-1-i. The
+expanded lines are what every later stage (normalisation, flows, the store key) sees.
 """
 
 from __future__ import annotations
@@ -34,7 +52,19 @@ MAX_LINES = 256
 MAX_VISEMES = 64
 
 _NAME = re.compile(r"^[A-Za-z0-9_.+-]{1,64}$")
+#: Feature names: like viseme names; "#" is reserved for the expanded segments of a curve.
+_FEATURE_NAME = re.compile(r"^[A-Za-z0-9_.+-]{1,64}$")
 _Point = Tuple[float, float]
+#: Segments per cubic piece when a Bézier gives no ``segments``: 8 chords of a quarter
+#: circle deviate from it by < 0.2 % of its radius, well under a pixel for mouth-sized curves.
+BEZIER_SEGMENTS_PER_PIECE = 8
+#: Most control points one curve may have (a whole lip contour needs ~10-20).
+MAX_CURVE_POINTS = 64
+#: Most segments one curve may expand into (MAX_LINES bounds the total anyway).
+MAX_CURVE_SEGMENTS = 64
+#: Samples per cubic piece for measuring arc length: the chord sum of 256 samples matches a
+#: cubic's length to ~1e-5 relative, so resampled points sit well within 0.01 px.
+_ARC_SAMPLES = 256
 
 
 class WarpParams(BaseModel):
@@ -49,7 +79,8 @@ class WarpParams(BaseModel):
 class _VisemeSpec(BaseModel):
     model_config = ConfigDict(extra="forbid")
     image: str
-    lines: Dict[str, Tuple[_Point, _Point]]
+    # Checked feature by feature in _parse_feature, for messages that name the feature.
+    lines: Dict[str, object]
 
 
 class _BankSpec(BaseModel):
@@ -69,11 +100,138 @@ class _BankSpec(BaseModel):
 
 
 def _mirror_partner(name: str) -> Optional[str]:
-    if name.endswith("_l"):
-        return name[:-2] + "_r"
-    if name.endswith("_r"):
-        return name[:-2] + "_l"
+    base, sep, index = name.partition("#")
+    if base.endswith("_l"):
+        return base[:-2] + "_r" + sep + index
+    if base.endswith("_r"):
+        return base[:-2] + "_l" + sep + index
     return None
+
+
+def mirror_partner_index(line_names) -> np.ndarray:
+    """For each line, the index of its mirror partner (itself when it has none).
+
+    ``x_l``/``x_r`` pair up, also segment by segment for curves (``x_l#i`` with ``x_r#i``).
+    Segment i of an unpaired curve ``x#0..x#N-1`` (one crossing the axis, like a chin)
+    pairs with segment N-1-i: the reflection runs the curve backwards.
+
+    Examples
+    --------
+    >>> mirror_partner_index(["a_l", "a_r", "nose", "c#0", "c#1", "c#2"]).tolist()
+    [1, 0, 2, 5, 4, 3]
+    """
+    index = {n: i for i, n in enumerate(line_names)}
+    counts: Dict[str, int] = {}
+    for n in line_names:
+        base, sep, _ = n.partition("#")
+        if sep:
+            counts[base] = counts.get(base, 0) + 1
+    out = []
+    for i, n in enumerate(line_names):
+        partner = _mirror_partner(n)
+        if partner is None and "#" in n:
+            base, _, k = n.partition("#")
+            partner = f"{base}#{counts[base] - 1 - int(k)}"
+        out.append(index.get(partner, i) if partner is not None else i)
+    return np.array(out, dtype=np.intp)
+
+
+@dataclass(frozen=True)
+class Feature:
+    """One control feature of one viseme as written in bank.yaml.
+
+    Attributes
+    ----------
+    kind : str
+        ``"line"``, ``"polyline"`` or ``"bezier"``.
+    points : numpy.ndarray
+        float64 ``(K, 2)``: P and Q of a line, the vertices of a polyline, the control
+        points of a Bézier.
+    segments : int or None
+        Segment count as written (None: the default for the kind).
+    """
+
+    kind: str
+    points: np.ndarray = field(repr=False)
+    segments: Optional[int] = None
+
+    @property
+    def segment_count(self) -> int:
+        """How many line segments the feature expands into."""
+        if self.kind == "line":
+            return 1
+        if self.segments is not None:
+            return self.segments
+        if self.kind == "polyline":
+            return len(self.points) - 1
+        return BEZIER_SEGMENTS_PER_PIECE * ((len(self.points) - 1) // 3)
+
+    def expand(self) -> np.ndarray:
+        """The feature as float64 ``(N, 2, 2)`` line segments (see module docstring).
+
+        Examples
+        --------
+        >>> f = Feature("polyline", np.array([[0., 0], [3, 0], [3, 1]]), segments=4)
+        >>> f.expand()[:, 0].tolist()
+        [[0.0, 0.0], [1.0, 0.0], [2.0, 0.0], [3.0, 0.0]]
+        """
+        pts = np.asarray(self.points, dtype=np.float64)
+        n = self.segment_count
+        if self.kind == "line" or (self.kind == "polyline" and self.segments is None):
+            chain = pts
+        else:
+            chain = _arc_length_points(pts, n, bezier=self.kind == "bezier")
+        return np.stack([chain[:-1], chain[1:]], axis=1)
+
+    def to_yaml_value(self):
+        """The plain data this feature is written as in bank.yaml."""
+        pts = [[_num(x), _num(y)] for x, y in np.asarray(self.points).tolist()]
+        if self.kind == "line":
+            return pts
+        out = {self.kind: pts}
+        if self.segments is not None:
+            out["segments"] = int(self.segments)
+        return out
+
+
+def _num(v: float):
+    """A coordinate as written: integers without ".0", others rounded to 1/1000 px."""
+    r = round(float(v), 3)
+    return int(r) if r == int(r) else r
+
+
+def _bezier_eval(ctrl: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """Points of a chained cubic at global parameters ``t`` in [0, pieces]."""
+    pieces = (len(ctrl) - 1) // 3
+    k = np.clip(np.floor(t).astype(np.intp), 0, pieces - 1)
+    u = (t - k)[:, None]
+    p0, c1, c2, p1 = ctrl[3 * k], ctrl[3 * k + 1], ctrl[3 * k + 2], ctrl[3 * k + 3]
+    v = 1.0 - u
+    return v ** 3 * p0 + 3 * v * v * u * c1 + 3 * v * u * u * c2 + u ** 3 * p1
+
+
+def _arc_length_points(pts: np.ndarray, n: int, *, bezier: bool) -> np.ndarray:
+    """``n + 1`` points at equal arc-length steps along a polyline or a chained cubic."""
+    if bezier:
+        pieces = (len(pts) - 1) // 3
+        t = np.linspace(0.0, pieces, pieces * _ARC_SAMPLES + 1)
+        dense = _bezier_eval(pts, t)
+    else:
+        t = np.arange(len(pts), dtype=np.float64)
+        dense = pts
+    cum = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(dense, axis=0).T))])
+    target = np.linspace(0.0, cum[-1], n + 1)
+    # Map each target length back to a curve parameter (cum is non-decreasing) and evaluate
+    # the exact curve there; for a polyline the parameter interpolates its vertices.
+    tt = np.interp(target, cum, t)
+    if bezier:
+        out = _bezier_eval(pts, tt)
+    else:
+        k = np.clip(np.floor(tt).astype(np.intp), 0, len(pts) - 2)
+        u = (tt - k)[:, None]
+        out = (1 - u) * pts[k] + u * pts[k + 1]
+    out[0], out[-1] = pts[0], pts[-1]  # exact ends, whatever the rounding
+    return out
 
 
 @dataclass(frozen=True)
@@ -97,7 +255,11 @@ class Bank:
     images : dict
         Viseme name -> RGB ``uint8`` ``(H, W, 3)`` image.
     lines : dict
-        Viseme name -> float64 ``(L, 2, 2)`` control lines in ``line_names`` order.
+        Viseme name -> float64 ``(L, 2, 2)`` control lines in ``line_names`` order
+        (curves already expanded into segments ``name#i``).
+    features : dict
+        Viseme name -> {feature name -> :class:`Feature`} as written in bank.yaml, in file
+        order (for drawing and editing curves; empty for banks built by hand in code).
 
     Examples
     --------
@@ -116,6 +278,14 @@ class Bank:
     line_names: Tuple[str, ...]
     images: Dict[str, np.ndarray] = field(repr=False)
     lines: Dict[str, np.ndarray] = field(repr=False)
+    features: Dict[str, Dict[str, Feature]] = field(default_factory=dict, repr=False)
+
+    @property
+    def feature_names(self) -> Tuple[str, ...]:
+        """Feature names in file order (line names, when no feature is a curve)."""
+        if self.features:
+            return tuple(self.features[self.names[0]])
+        return self.line_names
 
     @property
     def shape(self) -> Tuple[int, int]:
@@ -159,6 +329,26 @@ class Bank:
         """
         return _load(Path(path))
 
+    @classmethod
+    def from_text(cls, text: str, folder: Union[str, os.PathLike], *,
+                  images: Optional[Dict[str, np.ndarray]] = None) -> "Bank":
+        """Validate bank.yaml text as if it were ``folder/bank.yaml`` (nothing is written).
+
+        ``images`` maps image file names (as written in the text) to decoded images already
+        read from ``folder``, to skip decoding them again (the editor validates on every save).
+
+        Examples
+        --------
+        >>> from lipsync._data import default_bank_dir
+        >>> d = default_bank_dir()
+        >>> Bank.from_text((d / "bank.yaml").read_text(), d).rest
+        'X'
+        """
+        folder = Path(folder)
+        yaml_path = folder / "bank.yaml"
+        root, data = _parse_yaml_text(text, yaml_path)
+        return _build(root, data, folder, yaml_path, images)
+
 
 # --------------------------------------------------------------------------- loading
 
@@ -195,6 +385,12 @@ def _read_yaml(yaml_path: Path):
         raise BankError(f"not UTF-8 text (byte {exc.start})", path=yaml_path) from None
     except OSError as exc:
         raise BankError(f"cannot read: {exc.strerror}", path=yaml_path) from None
+    return _parse_yaml_text(text, yaml_path)
+
+
+def _parse_yaml_text(text: str, yaml_path: Path):
+    if len(text.encode("utf-8", "surrogatepass")) > MAX_YAML_BYTES:
+        raise BankError(f"text is over {MAX_YAML_BYTES} bytes, the limit of a bank.yaml", path=yaml_path)
     try:
         # One parse: compose the node tree (it keeps line numbers for error messages), then
         # build plain data from it. SafeLoader refuses custom tags; libyaml's C loader is
@@ -333,6 +529,57 @@ def _load(path: Path) -> Bank:
     else:
         folder, yaml_path = path.parent, path
     root, data = _read_yaml(yaml_path)
+    return _build(root, data, folder, yaml_path, None)
+
+
+def _parse_feature(value, where: str, fail):
+    """A bank.yaml feature value -> :class:`Feature` (``fail(msg)`` raises)."""
+    def points(raw, what: str, least: int) -> np.ndarray:
+        if not isinstance(raw, (list, tuple)) or len(raw) < least:
+            fail(f"{where}: {what} needs a list of at least {least} [x, y] points")
+        if len(raw) > MAX_CURVE_POINTS:
+            fail(f"{where}: {what} has {len(raw)} points; at most {MAX_CURVE_POINTS} are supported")
+        out = []
+        for p in raw:
+            if (not isinstance(p, (list, tuple)) or len(p) != 2
+                    or not all(isinstance(c, (int, float)) and not isinstance(c, bool) for c in p)):
+                fail(f"{where}: {what} points must be [x, y] pairs of numbers, got {p!r}"[:200])
+            try:
+                out.append([float(p[0]), float(p[1])])
+            except OverflowError:  # an integer too large for a float
+                fail(f"{where}: coordinates must be finite numbers")
+        arr = np.array(out, dtype=np.float64)
+        if not np.all(np.isfinite(arr)):
+            fail(f"{where}: coordinates must be finite numbers")
+        return arr
+
+    if isinstance(value, (list, tuple)):
+        if len(value) != 2:
+            fail(f"{where}: a line is [[Px, Py], [Qx, Qy]] (two points), got {len(value)} points; "
+                 f"write longer shapes as {{polyline: [...]}} or {{bezier: [...]}}")
+        return Feature("line", points(value, "a line", 2))
+    if not isinstance(value, dict):
+        fail(f"{where}: expected [[Px, Py], [Qx, Qy]], {{polyline: [...]}} or {{bezier: [...]}}")
+    kinds = [k for k in ("polyline", "bezier") if k in value]
+    unknown = [k for k in value if k not in ("polyline", "bezier", "segments")]
+    if unknown or len(kinds) != 1:
+        fail(f"{where}: a curve is {{polyline: [...]}} or {{bezier: [...]}} with optional segments: N"
+             + (f"; unknown key {unknown[0]!r}" if unknown else ""))
+    kind = kinds[0]
+    pts = points(value[kind], f"a {kind}", 4 if kind == "bezier" else 2)
+    if kind == "bezier" and (len(pts) - 1) % 3:
+        fail(f"{where}: a cubic Bézier has 3k+1 control points (4, 7, 10, ...), got {len(pts)}")
+    segments = value.get("segments")
+    if segments is not None:
+        if not isinstance(segments, int) or isinstance(segments, bool) or not 1 <= segments <= MAX_CURVE_SEGMENTS:
+            fail(f"{where}: segments must be a whole number from 1 to {MAX_CURVE_SEGMENTS}")
+    feature = Feature(kind, pts, segments)
+    if feature.segment_count > MAX_CURVE_SEGMENTS:
+        fail(f"{where}: expands into {feature.segment_count} segments; at most {MAX_CURVE_SEGMENTS}")
+    return feature
+
+
+def _build(root, data, folder: Path, yaml_path: Path, image_cache) -> Bank:
     if not isinstance(data, dict):
         raise BankError("expected a mapping with name, rest and visemes", path=yaml_path, line=1)
 
@@ -342,10 +589,17 @@ def _load(path: Path) -> Bank:
         err = exc.errors()[0]
         loc = [str(x) for x in err["loc"]]
         where = ".".join(loc) or "bank"
-        raise BankError(f"{where}: {err['msg']}", path=yaml_path, line=_yaml_line(root, loc)) from None
+        error = BankError(f"{where}: {err['msg']}", path=yaml_path, line=_yaml_line(root, loc))
+        if len(loc) >= 2 and loc[0] == "visemes":
+            error.viseme = loc[1]
+        raise error from None
 
     def fail(msg: str, keys: List[str]):
-        raise BankError(msg, path=yaml_path, line=_yaml_line(root, keys))
+        error = BankError(msg, path=yaml_path, line=_yaml_line(root, keys))
+        # Structured place of the error, for the editor to show it beside the feature.
+        error.viseme = keys[1] if len(keys) > 1 and keys[0] == "visemes" else None
+        error.feature = keys[3] if len(keys) > 3 else None
+        raise error
 
     if len(spec.visemes) > MAX_VISEMES:
         fail(f"{len(spec.visemes)} visemes; at most {MAX_VISEMES} are supported", ["visemes"])
@@ -357,16 +611,21 @@ def _load(path: Path) -> Bank:
         fail(f"rest viseme {spec.rest!r} is not among the visemes ({', '.join(names)})", ["rest"])
 
     first = names[0]
-    line_names = tuple(spec.visemes[first].lines)
-    if not line_names:
+    feature_names = tuple(str(n) for n in spec.visemes[first].lines)
+    if not feature_names:
         fail(f"viseme {first!r}: no control lines", ["visemes", first, "lines"])
-    if len(line_names) > MAX_LINES:
-        fail(f"viseme {first!r}: {len(line_names)} lines; at most {MAX_LINES} are supported",
+    if len(feature_names) > MAX_LINES:
+        fail(f"viseme {first!r}: {len(feature_names)} lines; at most {MAX_LINES} are supported",
              ["visemes", first, "lines"])
     for v in names:
+        for n in spec.visemes[v].lines:
+            if not _FEATURE_NAME.match(str(n)):
+                fail(f"viseme {v!r}, line {n!r}: names use letters, digits and _ . + - only "
+                     f"('#' marks the segments of a curve)", ["visemes", v, "lines", str(n)])
+    for v in names:
         have = set(spec.visemes[v].lines)
-        missing = [n for n in line_names if n not in have]
-        extra = [n for n in spec.visemes[v].lines if n not in set(line_names)]
+        missing = [n for n in feature_names if n not in have]
+        extra = [n for n in spec.visemes[v].lines if n not in set(feature_names)]
         if missing:
             fail(f"viseme {v!r}: missing line {missing[0]!r} (every viseme needs the same line names "
                  f"as {first!r})", ["visemes", v, "lines"])
@@ -374,23 +633,63 @@ def _load(path: Path) -> Bank:
             fail(f"viseme {v!r}: line {extra[0]!r} is not in viseme {first!r} (every viseme needs the "
                  f"same line names)", ["visemes", v, "lines", extra[0]])
     if spec.symmetry:
-        for n in line_names:
+        for n in feature_names:
             partner = _mirror_partner(n)
-            if partner is not None and partner not in set(line_names):
+            if partner is not None and partner not in set(feature_names):
                 fail(f"viseme {first!r}, line {n!r}: symmetry is on but its mirror partner "
                      f"{partner!r} is missing", ["visemes", first, "lines", n])
 
+    features: Dict[str, Dict[str, Feature]] = {}
+    for v in names:
+        features[v] = {}
+        for n in feature_names:
+            keys = ["visemes", v, "lines", n]
+            features[v][n] = _parse_feature(spec.visemes[v].lines[n],
+                                            f"visemes.{v}.lines.{n} (viseme {v!r}, line {n!r})",
+                                            lambda msg, keys=keys: fail(msg, keys))
+    counts = {n: features[first][n].segment_count for n in feature_names}
+    for v in names:
+        for n in feature_names:
+            got = features[v][n].segment_count
+            if got != counts[n]:
+                fail(f"viseme {v!r}, line {n!r}: {got} segments but {counts[n]} in viseme {first!r} "
+                     f"(a feature needs the same segment count in every viseme)", ["visemes", v, "lines", n])
+    if spec.symmetry:
+        for n in feature_names:
+            partner = _mirror_partner(n)
+            if partner is not None and counts[partner] != counts[n]:
+                fail(f"viseme {first!r}, line {n!r}: {counts[n]} segments but its mirror partner "
+                     f"{partner!r} has {counts[partner]}", ["visemes", first, "lines", n])
+
+    line_names: List[str] = []
+    for n in feature_names:
+        kind = features[first][n].kind
+        line_names += [n] if kind == "line" else [f"{n}#{i}" for i in range(counts[n])]
+    if len(line_names) > MAX_LINES:
+        fail(f"viseme {first!r}: {len(line_names)} lines (curves counted by segments); at most {MAX_LINES} "
+             f"are supported", ["visemes", first, "lines"])
+    for n in feature_names:
+        kinds = {features[v][n].kind == "line" for v in names}
+        if len(kinds) > 1:
+            # A line in one viseme and a one-segment curve in another would give the segment
+            # two names; ask for one spelling.
+            v = next(v for v in names if (features[v][n].kind == "line") != (features[first][n].kind == "line"))
+            fail(f"viseme {v!r}, line {n!r}: a line here but a curve in viseme {first!r}; write it the "
+                 f"same way in every viseme", ["visemes", v, "lines", n])
+
     lines: Dict[str, np.ndarray] = {}
     for v in names:
-        arr = np.array([spec.visemes[v].lines[n] for n in line_names], dtype=np.float64)
-        for i, n in enumerate(line_names):
-            if not np.all(np.isfinite(arr[i])):
-                fail(f"viseme {v!r}, line {n!r}: coordinates must be finite numbers",
-                     ["visemes", v, "lines", n])
-            if np.hypot(*(arr[i, 1] - arr[i, 0])) < 1e-6:
-                fail(f"viseme {v!r}, line {n!r}: zero-length line (P equals Q)",
-                     ["visemes", v, "lines", n])
-        lines[v] = arr
+        parts = []
+        for n in feature_names:
+            seg = features[v][n].expand()
+            lengths = np.hypot(*(seg[:, 1] - seg[:, 0]).T)
+            if lengths.min() < 1e-6:
+                k = int(np.argmin(lengths))
+                what = "zero-length line (P equals Q)" if features[v][n].kind == "line" else \
+                    f"segment {k} has zero length (repeated points or a curve of no length)"
+                fail(f"viseme {v!r}, line {n!r}: {what}", ["visemes", v, "lines", n])
+            parts.append(seg)
+        lines[v] = np.concatenate(parts, axis=0)
 
     folder_real = folder.resolve()
     images: Dict[str, np.ndarray] = {}
@@ -408,7 +707,10 @@ def _load(path: Path) -> Bank:
             fail(f"viseme {v!r}: cannot resolve image path {rel!r}", keys)
         if folder_real != real and folder_real not in real.parents:
             fail(f"viseme {v!r}: image path {rel!r} leads outside the bank folder", keys)
-        img = _read_image(real, f"viseme {v!r}", yaml_path, line)
+        if image_cache is not None and rel in image_cache:
+            img = image_cache[rel]
+        else:
+            img = _read_image(real, f"viseme {v!r}", yaml_path, line)
         if shape is None:
             shape = img.shape
         elif img.shape != shape:
@@ -424,8 +726,8 @@ def _load(path: Path) -> Bank:
         bad = np.flatnonzero(np.any((arr[..., 0] < -margin) | (arr[..., 0] > w + margin) |
                                     (arr[..., 1] < -margin) | (arr[..., 1] > h + margin), axis=1))
         if bad.size:
-            n = line_names[bad[0]]
+            n = line_names[bad[0]].partition("#")[0]
             fail(f"viseme {v!r}, line {n!r}: lies far outside the {w}x{h} image", ["visemes", v, "lines", n])
 
     return Bank(path=folder, name=spec.name, rest=spec.rest, warp=spec.warp, symmetry=spec.symmetry,
-                names=names, line_names=line_names, images=images, lines=lines)
+                names=names, line_names=tuple(line_names), images=images, lines=lines, features=features)

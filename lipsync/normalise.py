@@ -19,7 +19,7 @@ from typing import Dict, Optional, Sequence, Tuple
 
 import numpy as np
 
-from .bank import Bank, _mirror_partner
+from .bank import Bank, mirror_partner_index
 from .warp import beier_neely_map, warp
 
 
@@ -37,12 +37,8 @@ def mirror_points(points: np.ndarray, axis: float) -> np.ndarray:
 
 
 def _partner_index(line_names: Sequence[str]) -> np.ndarray:
-    index = {n: i for i, n in enumerate(line_names)}
-    partners = []
-    for i, n in enumerate(line_names):
-        partner = _mirror_partner(n)
-        partners.append(index[partner] if partner in index else i)
-    return np.array(partners)
+    # Curves (segments "name#i") pair up in bank.mirror_partner_index.
+    return mirror_partner_index(line_names)
 
 
 def estimate_axis(lines: np.ndarray, line_names: Sequence[str]) -> Optional[float]:
@@ -89,7 +85,9 @@ def symmetric_lines(lines: np.ndarray, line_names: Sequence[str], axis: float) -
     partners = _partner_index(line_names)
     reflected = mirror_points(lines[partners], axis)
     for i, j in enumerate(partners):
-        if i == j:
+        # Unpaired lines, and segment i of an unpaired curve (whose mirror is segment N-1-i),
+        # reflect onto themselves running backwards.
+        if i == j or "#" in line_names[i] and line_names[i].partition("#")[0] == line_names[j].partition("#")[0]:
             same = np.abs(reflected[i] - lines[i]).sum()
             swapped = np.abs(reflected[i][::-1] - lines[i]).sum()
             if swapped < same:

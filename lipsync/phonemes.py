@@ -289,9 +289,11 @@ def _register_shipped() -> None:
     for path in sorted((root / "phonesets").glob("*.yaml")):
         PHONESETS.register(path.stem, path)
     for path in sorted((root / "maps").glob("*.yaml")):
-        # "english-to-rhubarb" is also reachable as "rhubarb".
-        short = path.stem.split("-to-", 1)[-1]
-        MAPS.register(path.stem, path, aliases=(short,) if short != path.stem else ())
+        # "english-to-rhubarb" is also reachable as "rhubarb"; maps from other label sets
+        # (polly-to-rhubarb, azure-to-rhubarb) keep their full names, so the short name
+        # always means the map from the default phone set.
+        source, _, short = path.stem.partition("-to-")
+        MAPS.register(path.stem, path, aliases=(short,) if short and source == DEFAULT_PHONESET else ())
 
 
 _register_shipped()

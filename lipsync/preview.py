@@ -20,7 +20,7 @@ from collections.abc import Mapping, Sequence
 import cv2
 import numpy as np
 
-__all__ = ["draw_lines", "preview_sheet", "strip", "save_png"]
+__all__ = ["draw_lines", "feature_lines", "preview_sheet", "strip", "save_png"]
 
 # Distinct, saturated colours that stay visible on skin, lips, teeth and dark mouth interiors.
 # Lines get them in sorted order of their base name, so a line keeps its colour in every
@@ -54,11 +54,44 @@ def _as_rgb(image, what: str = "image") -> np.ndarray:
 
 
 def _as_line(name: str, line) -> np.ndarray:
+    """A line ``(2, 2)`` or a curve as its chain of segments ``(N, 2, 2)``."""
     a = np.asarray(line, dtype=np.float64)
-    if a.shape != (2, 2) or not np.all(np.isfinite(a)):
-        raise ValueError(f"line {name!r} must be [[Px, Py], [Qx, Qy]] with finite numbers, "
-                         f"got {line!r}")
+    ok = a.shape == (2, 2) or (a.ndim == 3 and a.shape[0] >= 1 and a.shape[1:] == (2, 2))
+    if not ok or not np.all(np.isfinite(a)):
+        raise ValueError(f"line {name!r} must be [[Px, Py], [Qx, Qy]] (or a curve's (N, 2, 2) "
+                         f"segments) with finite numbers, got {line!r}")
     return a
+
+
+def feature_lines(line_names, lines) -> dict[str, np.ndarray]:
+    """Group a bank's expanded lines by feature: curve segments ``name#i`` become one entry.
+
+    Parameters
+    ----------
+    line_names : sequence of str
+        ``Bank.line_names``.
+    lines : array_like (L, 2, 2)
+        One viseme's lines in that order.
+
+    Returns
+    -------
+    dict
+        Feature name → ``(2, 2)`` for a line, ``(N, 2, 2)`` for a curve's segments, ready for
+        :func:`draw_lines`.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> out = feature_lines(["nose", "lip#0", "lip#1"], np.zeros((3, 2, 2)))
+    >>> {k: v.shape for k, v in out.items()}
+    {'nose': (2, 2), 'lip': (2, 2, 2)}
+    """
+    arr = np.asarray(lines, dtype=np.float64)
+    out: dict[str, list] = {}
+    for i, n in enumerate(line_names):
+        base, sep, _ = str(n).partition("#")
+        out.setdefault(base if sep else str(n), []).append((sep, arr[i]))
+    return {k: (np.stack([a for _, a in v]) if v[0][0] else v[0][1]) for k, v in out.items()}
 
 
 def _colours(names) -> dict[str, tuple[int, int, int]]:
@@ -88,8 +121,9 @@ def draw_lines(image, lines: Mapping[str, object], *, labels: bool = True) -> np
     ----------
     image : array_like, (H, W, 3) uint8
         RGB image (a 2-D grey image is accepted and drawn in colour).
-    lines : Mapping[str, array_like (2, 2)]
-        Line name → ``[[Px, Py], [Qx, Qy]]`` in pixels (x right, y down).
+    lines : Mapping[str, array_like (2, 2) or (N, 2, 2)]
+        Line name → ``[[Px, Py], [Qx, Qy]]`` in pixels (x right, y down), or a curve's
+        segments (see :func:`feature_lines`), drawn as one chain with ticks at the joins.
     labels : bool, default True
         Write each line's name beside it in small text.
 
@@ -120,19 +154,34 @@ def draw_lines(image, lines: Mapping[str, object], *, labels: bool = True) -> np
     # cv2 draws with integer vertices plus fractional bits; 4 bits is 1/16 pixel.
     frac = 4
     one = 1 << frac
-    for name, (p, q) in parsed.items():
+    def fixed(point):
+        return tuple(int(round(v * one)) for v in point)
+
+    for name, shape in parsed.items():
         col = colours[_base_name(name)]
-        pi = tuple(int(round(v * one)) for v in p)
-        qi = tuple(int(round(v * one)) for v in q)
+        if shape.ndim == 3:  # a curve: its segments as one chain, small ticks at the joins
+            chain = np.concatenate([shape[:, 0], shape[-1:, 1]])
+            if len(chain) > 2:
+                cv2.polylines(out, [np.round(chain[:-1] * one).astype(np.int32)], False, col, thick,
+                              cv2.LINE_AA, frac)
+                for joint in chain[1:-1]:
+                    cv2.circle(out, fixed(joint), max(1, dot // 2) * one, col, -1, cv2.LINE_AA, frac)
+            p, q = shape[-1]
+            start = chain[0]
+        else:
+            p, q = shape
+            start = p
         length = float(np.hypot(*(q - p)))
         # Arrow heads of a fixed size in pixels, whatever the line's length.
         tip = min(0.6, 7.0 * k / length) if length > 0 else 0.0
-        cv2.arrowedLine(out, pi, qi, col, thick, cv2.LINE_AA, frac, tip)
-        cv2.circle(out, pi, dot * one, col, -1, cv2.LINE_AA, frac)
+        cv2.arrowedLine(out, fixed(p), fixed(q), col, thick, cv2.LINE_AA, frac, tip)
+        cv2.circle(out, fixed(start), dot * one, col, -1, cv2.LINE_AA, frac)
     if labels:
         scale = 0.3 * k
-        for name, (p, q) in parsed.items():
+        for name, shape in parsed.items():
             col = colours[_base_name(name)]
+            # A curve is labelled beside its middle segment.
+            p, q = shape[len(shape) // 2] if shape.ndim == 3 else shape
             mid = (p + q) / 2
             d = q - p
             n = np.array([-d[1], d[0]]) / (np.hypot(*d) or 1.0)

@@ -255,6 +255,12 @@ def _choose_reader(name: str, data: bytes) -> Reader:
     for _, reader in READERS.items():
         if reader.sniff(head):
             return reader
+    # JSON the first bytes did not give away: recognised by its structure, or an error
+    # listing the JSON formats (rather than one format's complaint about missing keys).
+    from .readers.jsonkind import json_reader_for
+    reader = json_reader_for(name, data)
+    if reader is not None:
+        return reader
     if ext_name is not None:
         return READERS.get(ext_name)  # its own errors say what is wrong with the content
     from .readers._common import looks_binary

@@ -164,6 +164,10 @@ SEED_FILES: Dict[str, List[Path]] = {
     "moho": _files("tests/data/timelines/*.dat"),
     "timit": _files("samples/*.phn", "tests/data/timelines/timit_*.PHN", "tests/data/timelines/timit_*.phn"),
     "audacity": _files("samples/*.txt", "tests/data/timelines/audacity_*.txt"),
+    "polly": _files("tests/data/timelines/polly_*.txt"),
+    "azure": _files("tests/data/timelines/azure_*.json"),
+    "whisper": _files("tests/data/timelines/whisper_*.json"),
+    "elevenlabs": _files("tests/data/timelines/elevenlabs_*.json"),
 }
 #: Known-bad golden inputs: good material for mutations of any format.
 ERROR_FILES = [p for p in _files("tests/data/timelines/error_*") if not p.name.endswith(".error")]
@@ -173,10 +177,13 @@ ALL_SEEDS: List[bytes] = [b for bs in SEEDS.values() for b in bs] + [p.read_byte
 #: Extensions and aliases each format is documented to answer to (lipsync/readers/*).
 EXTENSIONS = {"textgrid": [".TextGrid", ".textgrid"], "gentle": [".json"], "rhubarb-tsv": [".tsv"],
               "rhubarb-json": [".json"], "rhubarb-xml": [".xml"], "moho": [".dat"],
-              "timit": [".phn", ".PHN"], "audacity": [".txt", ".labels"]}
+              "timit": [".phn", ".PHN"], "audacity": [".txt", ".labels"],
+              "polly": [".marks", ".jsonl"], "azure": [".json"], "whisper": [".json"], "elevenlabs": [".json"]}
 ALIASES = {"textgrid": ["praat", "mfa", "TextGrid"], "gentle": ["GENTLE"], "rhubarb-tsv": ["tsv"],
            "rhubarb-json": ["Rhubarb-JSON"], "rhubarb-xml": ["xml"], "moho": ["dat", "papagayo"],
-           "timit": ["phn"], "audacity": ["labels"]}
+           "timit": ["phn"], "audacity": ["labels"],
+           "polly": ["speech-marks"], "azure": ["azure-visemes"], "whisper": ["words", "whisper.cpp"],
+           "elevenlabs": ["character-alignment"]}
 ALL_EXTENSIONS = sorted({e for es in EXTENSIONS.values() for e in es}) + [".lab", ".bin", ".yaml", ""]
 
 
@@ -341,9 +348,58 @@ def gen_audacity(draw) -> str:
     return "".join(out)
 
 
+POLLY_VISEMES = ["p", "t", "S", "T", "f", "k", "i", "r", "s", "u", "@", "a", "e", "E", "o", "O", "sil"]
+
+
+def gen_polly(draw) -> str:
+    lines = []
+    for s, _, lab in draw(intervals()):
+        kind = draw(st.sampled_from(["viseme", "viseme", "word", "sentence", "ssml", "other"]))
+        value = draw(st.sampled_from(POLLY_VISEMES)) if kind == "viseme" and draw(st.integers(0, 9)) else lab
+        lines.append(json.dumps({"time": json_value(draw, round(s * 1000)), "type": kind, "value": value}))
+    if draw(st.integers(0, 5)) == 0:
+        return "[" + ",\n".join(lines) + "]\n"
+    return "\n".join(lines) + "\n"
+
+
+def gen_azure(draw) -> str:
+    off, vid = draw(st.sampled_from([("AudioOffset", "VisemeId"), ("audioOffset", "visemeId"),
+                                     ("audio_offset", "viseme_id"), ("offset_ms", "visemeID")]))
+    events = [{off: json_value(draw, round(s * 1e7)), vid: json_value(draw, draw(st.integers(-1, 23)))}
+              for s, _, _ in draw(intervals())]
+    doc = draw(st.sampled_from([events, {"visemes": events},
+                                {"Metadata": [{"Type": "Viseme", "Data": e} for e in events]}]))
+    return json.dumps(doc, indent=draw(st.sampled_from([None, 2])))
+
+
+def gen_whisper(draw) -> str:
+    words = [{draw(st.sampled_from(["word", "text"])): lab, "start": json_value(draw, s), "end": json_value(draw, e)}
+             for s, e, lab in draw(intervals())]
+    doc = draw(st.sampled_from([{"segments": [{"start": 0, "end": 1, "text": "x", "words": words}]},
+                                {"words": words}, words, [{"words": words}],
+                                {"transcription": [{"offsets": {"from": w.get("start"), "to": w.get("end")},
+                                                    "text": w.get("word", w.get("text"))} for w in words]}]))
+    return json.dumps(doc, indent=draw(st.sampled_from([None, 2])))
+
+
+def gen_elevenlabs(draw) -> str:
+    chars, starts, ends = [], [], []
+    for s, e, lab in draw(intervals()):
+        for c in (lab or " ") + " ":
+            chars.append(c if draw(st.integers(0, 30)) else draw(st.sampled_from(WEIRD_JSON)))
+            starts.append(json_value(draw, s))
+            ends.append(json_value(draw, e))
+    if draw(st.integers(0, 10)) == 0:
+        ends = ends[:-1]
+    al = {"characters": chars, "character_start_times_seconds": starts, "character_end_times_seconds": ends}
+    doc = draw(st.sampled_from([al, {"alignment": al}, {"normalized_alignment": al, "audio_base64": ""}]))
+    return json.dumps(doc, indent=draw(st.sampled_from([None, 2])))
+
+
 GENERATORS = {"textgrid": gen_textgrid, "gentle": gen_gentle, "rhubarb-tsv": gen_rhubarb_tsv,
               "rhubarb-json": gen_rhubarb_json, "rhubarb-xml": gen_rhubarb_xml, "moho": gen_moho,
-              "timit": gen_timit, "audacity": gen_audacity}
+              "timit": gen_timit, "audacity": gen_audacity,
+              "polly": gen_polly, "azure": gen_azure, "whisper": gen_whisper, "elevenlabs": gen_elevenlabs}
 
 
 # --------------------------------------------------------------------------- mutations

@@ -79,7 +79,8 @@ def peak_mb(fn: Callable[[], object]) -> float:
 
 def _table(rows: List[dict]) -> str:
     lines = []
-    for fig in dict.fromkeys(r["figure"] for r in rows):  # every figure, in the order measured
+    # Every figure present, in the order they ran.
+    for fig in dict.fromkeys(r["figure"] for r in rows):
         sel = [r for r in rows if r["figure"] == fig]
         if not sel:
             continue

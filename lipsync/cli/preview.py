@@ -22,7 +22,7 @@ def add_parser(sub) -> None:
 def run(args: argparse.Namespace) -> int:
     from ..bank import Bank
     from ..normalise import normalise
-    from ..preview import preview_sheet, save_png
+    from ..preview import feature_lines, preview_sheet, save_png
 
     check_png(args.output)
     bank = Bank.load(args.bank)
@@ -31,6 +31,7 @@ def run(args: argparse.Namespace) -> int:
         images, lines = nb.images, nb.lines
     else:
         images, lines = bank.images, bank.lines
-    named = {v: {n: lines[v][i] for i, n in enumerate(bank.line_names)} for v in bank.names}
+    # Curves (segments name#i) are drawn as one chain each.
+    named = {v: feature_lines(bank.line_names, lines[v]) for v in bank.names}
     save_png(args.output, preview_sheet({v: images[v] for v in bank.names}, named, tile=SHEET_TILE))
     return 0

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import importlib
 
-MODULES = ["textgrid", "gentle", "rhubarb", "moho", "timit", "audacity"]
+MODULES = ["textgrid", "gentle", "rhubarb", "polly", "azure", "words", "moho", "timit", "audacity"]
 
 _loaded = False
 

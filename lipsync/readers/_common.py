@@ -178,8 +178,18 @@ def json_array_lines(text: str, key: str) -> List[int]:
     m = re.search(r'"' + re.escape(key) + r'"\s*:\s*\[', text)
     if not m:
         return []
+    return array_lines_at(text, m.end())
+
+
+def array_lines_at(text: str, pos: int) -> List[int]:
+    """1-based line of each element of the JSON array whose ``[`` ends just before ``pos``.
+
+    Returns [] if the array cannot be decoded (callers then report no line).
+    """
+    import json
+
     decoder = json.JSONDecoder()
-    pos, lines = m.end(), []
+    lines: List[int] = []
     ws = re.compile(r"[\s,]*")
     try:
         while True:

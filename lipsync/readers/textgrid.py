@@ -1,7 +1,8 @@
 """Praat TextGrid files (long and short text forms; UTF-8, or UTF-16 with a byte-order mark).
 
 The tier read is ``tier`` if given, else ``phones`` (the Montreal Forced Aligner's name),
-else the only tier whose name ends in "phones" (older MFA writes "<speaker> - phones").
+else the only tier whose name ends in "phones" (older MFA writes "<speaker> - phones"),
+else a ``visemes`` tier (what ``lipsync cues`` writes; its labels are read as visemes).
 A missing tier is an error that lists the tiers present.
 
 praatio parses the file. Alongside it, a small token scan (:func:`_scan`) walks the same
@@ -18,10 +19,13 @@ import unicodedata
 from typing import List, NamedTuple, Optional, Tuple
 
 from ..errors import TimelineError
-from ..timeline import PHONEME, READERS, Reader, ReadOptions, Timeline
+from ..timeline import PHONEME, READERS, VISEME, Reader, ReadOptions, Timeline
 from ._common import build, decode_text, sniff_text
 
 DEFAULT_TIER = "phones"
+# The tier lipsync's own cue writer (lipsync.writers.textgrid) writes: read as visemes, and
+# chosen when a file has no phones tier.
+VISEME_TIER = "visemes"
 
 _STRESS = re.compile(r"^([A-Za-z]+)[0-2]$")
 
@@ -191,6 +195,9 @@ def _pick_tier(path: str, tiers: List[_Tier], wanted: Optional[str]) -> _Tier:
     ending = [t for t in tiers if t.name.strip().lower().endswith(DEFAULT_TIER)]
     if len(ending) == 1:
         return ending[0]
+    for t in tiers:
+        if t.name == VISEME_TIER:
+            return t
     raise TimelineError(f"no tier named {DEFAULT_TIER!r} (choose one with --tier); tiers present: {listing}",
                         path=path)
 
@@ -210,7 +217,7 @@ def read(path: str, data: bytes, options: ReadOptions) -> Timeline:
         entries = [(a, b, p[2], line) for (a, b, _, line), p in zip(entries, parsed[tier.name])]
     rows = [(a, b, normalise_label(label), line) for a, b, label, line in entries]
     end = tier.xmax if tier.xmax > 0 else xmax
-    return build(path, rows, PHONEME, stated_end=end)
+    return build(path, rows, VISEME if tier.name == VISEME_TIER else PHONEME, stated_end=end)
 
 
 def sniff(head: bytes) -> bool:

@@ -1,0 +1,274 @@
+"""A starting bank.yaml for a folder of viseme images (``lipsync init``).
+
+One viseme per image, named from the file name (:mod:`.names`); every image must have one
+size. The control lines come from a template bank (the shipped toon by default): each new
+viseme gets the lines of the template viseme with the same mouth shape, moved onto the
+image by a scale and a shift, so that the first morph already looks like a mouth opening
+and the editor (``lipsync edit``) only has to nudge lines onto the drawing.
+
+Two layouts:
+
+* ``face`` — a whole face (photo or drawing): the template's face and mouth lines are
+  scaled to the image (uniformly, centred), or mapped onto ``face_box`` when given; the
+  template's frame lines (``frame_*``, which pin the picture's border) follow the border.
+* ``mouth`` — a mouth-only sprite, as Rhubarb users draw them: there are no eyes or chin to
+  anchor, so only the template's mouth lines are kept, plus the frame lines that keep the
+  sprite's border still. The mouth lines go where the sprites differ from one another (the
+  box of pixels that change between visemes: that is where the mouth moves), the template's
+  mouth box fitted into it; when nothing differs enough they fill :data:`MOUTH_FILL` of the
+  sprite around its centre.
+
+``auto`` (the default) picks ``mouth`` for images of at most :data:`SPRITE_MAX_SIDE`
+pixels a side without a face box, ``face`` otherwise.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Dict, List, Optional, Sequence, Tuple
+
+import numpy as np
+
+from ..bank import Bank, Feature, _read_image
+from ..errors import InputError
+from ..registry import Registry
+from .names import IMAGE_SUFFIXES, REST, SYSTEMS, name_images
+from .yamlio import dump_bank, write_bank_text
+
+#: Template banks by name; ``--template`` also takes a bank folder.
+TEMPLATES: Registry = Registry("template")
+
+
+def _toon_dir() -> Path:
+    from .._data import default_bank_dir
+
+    return default_bank_dir()
+
+
+TEMPLATES.register("toon", _toon_dir)
+
+LAYOUTS = ("auto", "face", "mouth")
+#: Rhubarb-style mouth sprites are ~100-250 px; a face that shows eyes, nose and mouth
+#: clearly enough to place lines on is larger.
+SPRITE_MAX_SIDE = 256
+#: Share of a sprite's width or height the template's widest mouth fills (room for lips
+#: that open further than the template's).
+MOUTH_FILL = 0.8
+#: A pixel "moves" when its value spans more than this across the visemes (0-255): above
+#: JPEG noise and anti-aliasing wobble, below any real change of lip or teeth.
+MOVING_LEVEL = 24
+#: Fewer moving pixels than this share of the sprite: no usable mouth region.
+MOVING_MIN_SHARE = 0.002
+#: Line names that belong to the mouth (kept in the mouth layout), by prefix.
+MOUTH_PREFIXES = ("upper_", "lower_", "corner_", "teeth_", "lip", "mouth", "tongue")
+#: Lines that pin the picture's border: scaled with the image, not the face.
+FRAME_PREFIX = "frame_"
+
+
+@dataclass(frozen=True)
+class InitResult:
+    """What :func:`init_bank` wrote."""
+
+    yaml_path: Path
+    visemes: Dict[str, str]  # viseme -> image file name
+    system: Optional[str]
+    rest: str
+    layout: str
+    size: Tuple[int, int]  # (W, H)
+
+
+def _images(folder: Path) -> List[Path]:
+    files = sorted(p for p in folder.iterdir()
+                   if p.is_file() and p.suffix.lower() in IMAGE_SUFFIXES and not p.name.startswith("."))
+    if not files:
+        raise InputError("no PNG or JPEG images here (one image per viseme)", path=folder)
+    return files
+
+
+def _affine(points: np.ndarray, scale: Tuple[float, float], origin_from, origin_to) -> np.ndarray:
+    return (points - np.asarray(origin_from)) * np.asarray(scale) + np.asarray(origin_to)
+
+
+def _bbox(features: Sequence[Dict[str, Feature]], keep) -> np.ndarray:
+    pts = np.concatenate([f.points for fs in features for n, f in fs.items() if keep(n)])
+    return np.array([pts.min(axis=0), pts.max(axis=0)])
+
+
+def _moving_box(images) -> Optional[np.ndarray]:
+    """``[[x0, y0], [x1, y1]]`` (pixel centres) of the pixels that change between images."""
+    stack = np.stack(list(images))
+    span = (stack.max(axis=0).astype(np.int16) - stack.min(axis=0)).max(axis=2)
+    ys, xs = np.nonzero(span > MOVING_LEVEL)
+    if xs.size < MOVING_MIN_SHARE * span.size:
+        return None
+    return np.array([[xs.min(), ys.min()], [xs.max(), ys.max()]], dtype=np.float64)
+
+
+def _is_mouth(name: str) -> bool:
+    return name.startswith(MOUTH_PREFIXES)
+
+
+def parse_face_box(text: str) -> Tuple[float, float, float, float]:
+    """``X,Y,W,H`` → floats; width and height must be positive.
+
+    Examples
+    --------
+    >>> parse_face_box("10, 20, 300, 400")
+    (10.0, 20.0, 300.0, 400.0)
+    """
+    try:
+        x, y, w, h = (float(v) for v in text.split(","))
+    except ValueError:
+        raise InputError(f"--face-box: expected X,Y,W,H in pixels, got {text!r}") from None
+    if not (w > 0 and h > 0) or not all(np.isfinite([x, y, w, h])):
+        raise InputError(f"--face-box: width and height must be positive, got {text!r}")
+    return x, y, w, h
+
+
+def init_bank(folder, *, template: str = "toon", names: Optional[Dict[str, str]] = None,
+              face_box: Optional[Tuple[float, float, float, float]] = None, layout: str = "auto",
+              rest: Optional[str] = None, force: bool = False) -> InitResult:
+    """Write ``folder/bank.yaml`` for the images in ``folder``; it passes ``lipsync check``.
+
+    Parameters
+    ----------
+    folder : path-like
+        A folder of PNG/JPEG images, one per viseme.
+    template : str
+        A template name (``toon``) or a bank folder whose lines to start from.
+    names : dict, optional
+        File stem → viseme name, for files whose names are not a known viseme name.
+    face_box : (x, y, w, h), optional
+        Where the face is in the images; the template's face is mapped onto it.
+    layout : {"auto", "face", "mouth"}
+        See the module docstring.
+    rest : str, optional
+        The rest viseme (default: X, rest or sil, whichever the names give).
+    force : bool
+        Overwrite an existing bank.yaml.
+
+    Returns
+    -------
+    InitResult
+
+    Raises
+    ------
+    InputError
+        No images, unrecognised names, images of differing sizes, an existing bank.yaml
+        without ``force``, a face box outside the images.
+
+    Examples
+    --------
+    >>> import tempfile, shutil
+    >>> from pathlib import Path
+    >>> from lipsync._data import default_bank_dir
+    >>> d = Path(tempfile.mkdtemp())
+    >>> for v in "AX": _ = shutil.copy(default_bank_dir() / f"{v}.png", d / f"mouth_{v}.png")
+    >>> r = init_bank(d)
+    >>> r.rest, r.layout, sorted(Bank.load(d).names)
+    ('X', 'face', ['A', 'X'])
+    """
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise InputError("not a folder (give the folder that holds the viseme images)", path=folder)
+    if layout not in LAYOUTS:
+        raise InputError(f"unknown layout {layout!r}; one of: {', '.join(LAYOUTS)}")
+    yaml_path = folder / "bank.yaml"
+    if yaml_path.exists() and not force:
+        raise InputError("bank.yaml exists already; use --force to replace it", path=yaml_path)
+
+    named, system = name_images(_images(folder), names)
+    images = {}
+    size = None
+    first = None
+    for v, path in named.items():
+        img = _read_image(path, f"viseme {v!r}", path, None)
+        if size is None:
+            size, first = img.shape[:2], path
+        elif img.shape[:2] != size:
+            raise InputError(f"image is {img.shape[1]}x{img.shape[0]} but {first.name} is {size[1]}x{size[0]}; "
+                             f"all visemes need one size", path=path)
+        images[path.name] = img
+    h, w = size
+
+    # Viseme order: the naming system's, then others by name.
+    order = list(SYSTEMS[system]) if system else []
+    visemes = [v for v in order if v in named] + sorted(v for v in named if v not in order)
+    shape_of = {}  # viseme -> template viseme
+    for v in visemes:
+        shape_of[v] = next((SYSTEMS[s][v] for s in SYSTEMS if v in SYSTEMS[s]), None)
+    if rest is None:
+        rest = next((v for v in visemes if system and v == REST[system]), None)
+        rest = rest or next((v for v in visemes if shape_of[v] == "X"), None) or visemes[0]
+    elif rest not in named:
+        raise InputError(f"--rest {rest!r} is not among the visemes ({', '.join(visemes)})")
+
+    if template in TEMPLATES:
+        tdir = Path(TEMPLATES.get(template)())
+    elif Path(template, "bank.yaml").is_file():
+        tdir = Path(template)
+    else:
+        TEMPLATES.get(template)  # raises, listing the template names
+
+    tbank = Bank.load(tdir)
+    th, tw = tbank.shape
+    default_shape = tbank.rest
+    if layout == "auto":
+        layout = "mouth" if face_box is None and max(h, w) <= SPRITE_MAX_SIDE else "face"
+    tfeatures = [tbank.features[v] for v in tbank.names]
+    if layout == "mouth":
+        keep = _is_mouth
+        box = _bbox(tfeatures, _is_mouth)
+        centre_from = box.mean(axis=0)
+        extent = np.maximum(box[1] - box[0], 1e-6)
+        moving = _moving_box(images.values()) if len(images) > 1 else None
+        if moving is not None:
+            size = np.maximum(moving[1] - moving[0], 1.0)
+            s = min(size[0] / extent[0], size[1] / extent[1])
+            scale, origin_from, origin_to = (s, s), centre_from, tuple(moving.mean(axis=0))
+        else:
+            s = MOUTH_FILL * min(w / extent[0], h / extent[1])
+            scale, origin_from, origin_to = (s, s), centre_from, ((w - 1) / 2, (h - 1) / 2)
+    else:
+        def keep(n):
+            return True
+        if face_box is not None:
+            bx, by, bw, bh = face_box
+            if bx < 0 or by < 0 or bx + bw > w or by + bh > h:
+                raise InputError(f"--face-box {bx:g},{by:g},{bw:g},{bh:g} reaches outside the {w}x{h} images")
+            box = _bbox(tfeatures, lambda n: not n.startswith(FRAME_PREFIX))
+            extent = np.maximum(box[1] - box[0], 1e-6)
+            scale, origin_from, origin_to = (bw / extent[0], bh / extent[1]), box[0], (bx, by)
+        else:
+            # Pixel centres: template column x covers [x - 0.5, x + 0.5], so the scale acts on
+            # x + 0.5; the template is centred in the image.
+            s = min(w / tw, h / th)
+            scale = (s, s)
+            origin_from = (-0.5, -0.5)
+            origin_to = ((w - s * tw) / 2 - 0.5, (h - s * th) / 2 - 0.5)
+    frame_scale = (w / tw, h / th)
+
+    doc_visemes = {}
+    for v in visemes:
+        source = tbank.features[shape_of[v] if shape_of[v] in tbank.features else default_shape]
+        lines = {}
+        for n, f in source.items():
+            if n.startswith(FRAME_PREFIX):
+                pts = _affine(f.points, frame_scale, (-0.5, -0.5), (-0.5, -0.5))
+            elif keep(n):
+                pts = _affine(f.points, scale, origin_from, origin_to)
+            else:
+                continue
+            lines[n] = Feature(f.kind, pts, f.segments).to_yaml_value()
+        doc_visemes[v] = {"image": named[v].name, "lines": lines}
+    doc = {"name": folder.resolve().name, "rest": rest,
+           "warp": {"a": tbank.warp.a, "b": tbank.warp.b, "p": tbank.warp.p},
+           "symmetry": tbank.symmetry, "visemes": doc_visemes}
+    header = [f"# Written by lipsync init from template {template!r} ({layout} layout); "
+              f"adjust the lines with: lipsync edit {folder}"]
+    text = dump_bank(doc, header=header)
+    Bank.from_text(text, folder, images=images)  # refuse to write a bank that would not load
+    write_bank_text(yaml_path, text)
+    return InitResult(yaml_path=yaml_path, visemes={v: named[v].name for v in visemes}, system=system,
+                      rest=rest, layout=layout, size=(w, h))

@@ -1,0 +1,89 @@
+"""``lipsync cues INPUT -o OUT``: the viseme track the video would show, as mouth cues.
+
+The track is the sequencer's cleaned segment plan (:func:`lipsync.sequencer.plan_segments`,
+what ``lipsync timeline`` prints: gaps to rest, merges, short pauses held, flickers dropped)
+of the input mapped with the same map as ``render``. It is written in a format other tools
+read (:data:`lipsync.writers.WRITERS`): Rhubarb's TSV, JSON and XML, Moho switch data at
+``--fps``, a Praat TextGrid, or an Audacity label track; the format comes from ``--format``
+or the output's extension.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+from typing import Dict
+
+from ..writers import DEFAULT_FPS, DEFAULT_TIER, WRITERS
+from ._common import add_bank_option, add_quiet_option, add_timeline_options, load_viseme_timeline
+
+
+def add_parser(subparsers) -> argparse.ArgumentParser:
+    """Register ``lipsync cues``."""
+    parser = subparsers.add_parser(
+        "cues", help="write the viseme track as mouth cues (Rhubarb, Moho, TextGrid, Audacity)",
+        description="Write the viseme track the video would show (after the sequencer's rules) as "
+                    "mouth cues for other tools: Rhubarb Lip Sync TSV/JSON/XML, Moho switch data, "
+                    "a Praat TextGrid or an Audacity label track.")
+    parser.add_argument("timeline", metavar="INPUT", help="timeline file (any format `lipsync render` reads)")
+    parser.add_argument("-o", "--output", required=True, metavar="OUT",
+                        help="output file; its extension picks the format unless --format is given "
+                             "(.tsv, .json, .xml, .dat, .TextGrid, .txt)")
+    parser.add_argument("--format", choices=WRITERS.names(), default=None, metavar="NAME",
+                        help=f"cue format: {', '.join(WRITERS.names())} (default: from OUT's extension)")
+    parser.add_argument("--fps", type=float, default=DEFAULT_FPS, metavar="N",
+                        help="frame rate of Moho .dat keys (default: 24, Moho's and Rhubarb's default)")
+    parser.add_argument("--tier-name", default=DEFAULT_TIER, metavar="NAME",
+                        help=f"TextGrid tier name (default: {DEFAULT_TIER})")
+    add_bank_option(parser)
+    add_quiet_option(parser)
+    add_timeline_options(parser)
+    parser.set_defaults(func=run)
+    return parser
+
+
+def run(args: argparse.Namespace) -> int:
+    """Write the cue file; returns the exit code."""
+    from ..errors import InputError
+    from ..phonemes import DEFAULT_MAP, load_map
+    from ..sequencer import FPS_RANGE, plan_segments
+    from ..writers import format_for, write_cues
+
+    name = args.format or format_for(args.output)  # a bad name fails before any reading
+    fps = float(args.fps)
+    if not (FPS_RANGE[0] <= fps <= FPS_RANGE[1]):
+        raise InputError(f"--fps {args.fps:g} is outside {FPS_RANGE[0]:g}..{FPS_RANGE[1]:g}")
+    if os.path.isdir(args.output):
+        raise InputError("is a folder; give a file name for the cues", path=args.output)
+    base = load_map(args.map or DEFAULT_MAP)  # the map's own names, whatever the bank calls them
+    if args.bank is not None:
+        timeline, pmap, to_map, rest = _bank_track(args, base)
+    else:
+        timeline, pmap = load_viseme_timeline(args)
+        to_map, rest = {}, pmap.silence
+    plan = plan_segments(timeline, rest=rest, closures=pmap.closures)
+    # Back to the map's own names (A-H, X for Rhubarb) so every format names shapes alike.
+    cues = [(a, b, to_map.get(v, v)) for a, b, v in plan]
+    rest = to_map.get(rest, rest)
+    names: Dict[str, str] = {}
+    if WRITERS.get(name).name == "moho":
+        # Preston Blair names where the map has them (Papagayo's and Moho's switch names).
+        names = {v: aliases[0] for v, aliases in base.aliases.items() if aliases}
+    write_cues(cues, args.output, name, rest=rest, fps=fps, tier=args.tier_name,
+               sound_file=os.path.abspath(args.timeline), names=names,
+               closures=[to_map.get(c, c) for c in pmap.closures], duration=timeline.duration)
+    if not args.quiet:
+        print(f"lipsync: wrote {len(cues)} cues ({WRITERS.get(name).name}) to {args.output}", file=sys.stderr)
+    return 0
+
+
+def _bank_track(args: argparse.Namespace, base):
+    """The track in the bank's names (checked against it), bank name -> map name, the bank's rest."""
+    from ..bank import Bank
+    from ..phonemes import resolve_visemes
+
+    bank = Bank.load(args.bank)
+    timeline, pmap = load_viseme_timeline(args, rest=bank.rest, viseme_names=bank.names)
+    names, _ = resolve_visemes(base, bank.names)
+    return timeline, pmap, {b: m for m, b in names.items()}, bank.rest
