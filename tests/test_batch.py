@@ -156,7 +156,7 @@ def test_batch_equals_render_frame_for_frame_and_resumes(cluster, project, tmp_p
     pairs = _transitions(client, "lipsync-pair-")
     n_vis = len(synthetic.RHUBARB_SHAPES)
     assert len(pairs) == n_vis * (n_vis - 1) // 2 and set(pairs.values()) == {1}
-    assert len(list((root / "cache" / "store" / "flows").glob("*.npz"))) == len(pairs)
+    assert len(list((root / "cache" / "store" / "flows").glob("*.flow"))) == len(pairs)
 
     # each good output equals `lipsync render` of the same clip, frame for frame
     total = 0.0

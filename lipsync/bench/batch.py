@@ -126,7 +126,7 @@ def bench_batch(rows: List[dict], tmp: Path, quick: bool) -> None:
                      "load_avg": round(os.getloadavg()[0], 1)})
 
     pack = pack_bank(default_bank_dir())
-    flows = sorted((cache / "store" / "flows").glob("*.npz"))
+    flows = sorted((cache / "store" / "flows").glob("*.flow"))
     outs = [p.stat().st_size for p in (tmp / "batch-out-2").glob("*.mp4")]
     ins = [j.input.stat().st_size for j in jobs]
     rows.append({"figure": "batch_bytes", "bank_pack_bytes": pack.nbytes, "flow_entries": len(flows),
