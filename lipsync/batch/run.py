@@ -142,6 +142,31 @@ def _write_report(path: Path, report: BatchReport) -> None:
 
 
 @contextlib.contextmanager
+def _ctrl_c_after_this() -> Iterator[None]:
+    """Hold a Ctrl-C until the block is over, then raise it.
+
+    Writing a finished clip (video, then sidecar) and marking it done in the report must
+    not be cut in two: an interrupted batch leaves whole videos, each with its sidecar and
+    each reported as done. Outside the main thread signals cannot be handled, so nothing
+    is deferred there.
+    """
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    caught: List[int] = []
+    previous = signal.signal(signal.SIGINT, lambda signum, frame: caught.append(signum))
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    if caught:
+        raise KeyboardInterrupt
+
+
+@contextlib.contextmanager
 def _workers_ignore_ctrl_c() -> Iterator[None]:
     """Start processes with SIGINT ignored (inherited through exec; Python keeps it so).
 
@@ -363,13 +388,14 @@ def _execute(client, jobs: List[ClipJob], todo: List[int], keys: List[str], pack
             res = {"ok": False, "error": f"worker has lipsync {res.get('version')}, this client {__version__}: "
                                          f"install the same version on the workers"}
         if res.get("ok"):
-            try:
-                write_done(outdir / jobs[i].output, res["data"], keys[i],
-                           {"frames": res["frames"], "fps": res["fps"], "seconds": res["seconds"],
-                            "input": str(jobs[i].input), "line": jobs[i].line})
-                r.status, r.frames, r.seconds = "done", int(res["frames"]), round(float(res["seconds"]), 3)
-            except OSError as exc:
-                r.status, r.error = "failed", f"writing {outdir / jobs[i].output}: {exc}"
+            with _ctrl_c_after_this():
+                try:
+                    write_done(outdir / jobs[i].output, res["data"], keys[i],
+                               {"frames": res["frames"], "fps": res["fps"], "seconds": res["seconds"],
+                                "input": str(jobs[i].input), "line": jobs[i].line})
+                    r.status, r.frames, r.seconds = "done", int(res["frames"]), round(float(res["seconds"]), 3)
+                except OSError as exc:
+                    r.status, r.error = "failed", f"writing {outdir / jobs[i].output}: {exc}"
         else:
             r.status, r.error = "failed", res.get("error", "unknown error")
         bar.update(1)

@@ -12,6 +12,8 @@ const UNDO_LIMIT = 200;
 const DRAFT_DELAY_MS = 150;   // coalesce a burst of edits into one draft
 const STATUS_EVERY_MS = 700;  // flow progress polling
 const PLAY_STEP = 0.05;
+// A short pause between played frames: lets the page paint and other requests finish.
+const PLAY_PAUSE_MS = 15;
 
 const S = {
   doc: null, names: [], shape: [0, 0], axis: null, current: null, selected: null,
@@ -487,6 +489,9 @@ async function play() {
     $("alpha").value = a;
     $("alpha-value").textContent = (+a).toFixed(2);
     await refreshPreview();
+    // refreshPreview returns at once while another preview is in flight; without a real
+    // pause this loop would spin on microtasks and starve the fetch it is waiting for.
+    await new Promise((done) => setTimeout(done, PLAY_PAUSE_MS));
   }
 }
 
