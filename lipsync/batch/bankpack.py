@@ -146,6 +146,8 @@ def _unpack(pack: BankPack, cache: Path) -> Path:
             if tmp.resolve() not in path.resolve().parents:  # a pack is data: never write outside
                 raise ValueError(f"bank pack path {rel!r} leaves the bank folder")
             atomic_write_bytes(path, lambda fh, data=data: fh.write(data))
+        if target.exists() and _folder_matches(target, pack):
+            return target  # another process on this machine finished unpacking meanwhile
         if target.exists():  # damaged (it did not match): move it aside, then take its place
             aside = banks / f".tmp-{os.getpid()}-{os.urandom(4).hex()}-old"
             try:
