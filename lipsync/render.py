@@ -15,7 +15,10 @@ Methods (registry :data:`METHODS`):
     in t with a cubic on the coarse grid, then one fused pass reads both displacements
     bilinearly, samples both images and blends: about two image lookups and a blend per
     pixel, whatever the subject. Only the box where the (dead-zoned) flows are non-zero or
-    the images differ is rendered; the rest of the frame is the common background.
+    the images differ is rendered; the rest of the frame is the common background. The
+    pass is compiled C with AVX2 gathers (:mod:`lipsync._flowkernel`, chosen at run time
+    by CPU); without it (no compiler at install, or a CPU without AVX2) a numba kernel
+    does the same in fixed point (:data:`KERNELS`).
 ``splat``
     The paper's forward mapping: every pixel of A is carried to ``X + alpha F(X)``. The
     paper rounds that to the nearest pixel; here each pixel is shared bilinearly among the
@@ -59,6 +62,44 @@ MIN_SPLAT_WEIGHT = 0.05
 MIN_ROWS_PER_THREAD = 64
 #: Cached per-pair states (views of the mapped store entries); 9 visemes need at most 72.
 MAX_PAIR_STATES = 96
+
+try:  # built by setup.py when a C compiler was there; optional
+    from . import _flowkernel
+except ImportError:  # pragma: no cover - depends on the install
+    _flowkernel = None
+
+#: Frame kernels of the flow method, fastest first. "avx2": compiled C, eight pixels at a
+#: time with gathers (about 3x less CPU per frame than numba on whole-frame motion,
+#: measured side by side by the bench figure "whole_frame"); "numba": portable fixed
+#: point, one pixel at a time.
+KERNELS: Registry[str] = Registry("frame kernel")
+KERNELS.register("avx2", "compiled C with AVX2 gathers (x86-64 CPUs since 2013)")
+KERNELS.register("numba", "numba, one pixel at a time (any CPU)")
+
+
+def available_kernels() -> list:
+    """The frame kernels this install and CPU can run, fastest first.
+
+    Examples
+    --------
+    >>> "numba" in available_kernels()
+    True
+    """
+    fast = _flowkernel is not None and _flowkernel.simd_available()
+    return (["avx2"] if fast else []) + ["numba"]
+
+
+def default_kernel() -> str:
+    """The kernel renderers use: ``$LIPSYNC_KERNEL`` if set (and runnable), else the fastest."""
+    name = os.environ.get("LIPSYNC_KERNEL")
+    if name:
+        name = name.lower()
+        KERNELS.get(name)  # unknown names list the valid ones
+        if name not in available_kernels():
+            raise InputError(f"LIPSYNC_KERNEL={name}: not available here (available: "
+                             f"{', '.join(available_kernels())})")
+        return name
+    return available_kernels()[0]
 
 METHODS: Registry[str] = Registry("morph method")
 for _name, _why in [("flow", "interpolate the cached flows (fast, default)"),
@@ -130,6 +171,27 @@ def pack_pixels(image: np.ndarray) -> np.ndarray:
     p |= image[..., 1].astype(np.int64) << _LANE
     p |= image[..., 2].astype(np.int64) << (2 * _LANE)
     return p
+
+
+def pack_rgbx(image: np.ndarray) -> np.ndarray:
+    """RGB ``uint8`` ``(H, W, 3)`` -> uint32 ``(H + 1, W + 1)`` R | G << 8 | B << 16, edges repeated.
+
+    The compiled kernel's input: one 4-byte load per tap, and the extra row and column let
+    the second taps of a pixel at the last row or column be read without a bounds test
+    (their weight is zero there).
+
+    Examples
+    --------
+    >>> p = pack_rgbx(np.array([[[1, 2, 3]]], np.uint8))
+    >>> p.shape, int(p[0, 0]) == 1 + (2 << 8) + (3 << 16), int(p[1, 1]) == int(p[0, 0])
+    ((2, 2), True, True)
+    """
+    h, w = image.shape[:2]
+    out = np.zeros((h + 1, w + 1, 4), np.uint8)
+    out[:h, :w, :3] = image
+    out[:h, w] = out[:h, w - 1]
+    out[h] = out[h - 1]
+    return out.view(np.uint32)[..., 0]
 
 
 @_nb.njit(cache=True, nogil=True, fastmath=True, boundscheck=False)
@@ -297,6 +359,10 @@ class Renderer:
     store : FlowStore, optional
         Where flows are read from (and written to, when a pair is missing); default: the
         bank's store. Missing pairs are computed on first use.
+    kernel : str, optional
+        The flow method's frame kernel, one of :func:`available_kernels` (default:
+        :func:`default_kernel`, the fastest). Their frames agree within two grey levels
+        (the numba kernel rounds positions to 1/64 px, the compiled one does not).
 
     Examples
     --------
@@ -307,9 +373,17 @@ class Renderer:
     ((512, 512, 3), dtype('uint8'))
     """
 
-    def __init__(self, bank, *, method: str = "flow", store: Optional[FlowStore] = None):
+    def __init__(self, bank, *, method: str = "flow", store: Optional[FlowStore] = None,
+                 kernel: Optional[str] = None):
         METHODS.get(method)  # raises, listing the valid names, if unknown
         self.method = _canonical(method)
+        if kernel is None:
+            kernel = default_kernel()
+        elif kernel.lower() not in available_kernels():
+            KERNELS.get(kernel)  # unknown names list the valid ones
+            raise InputError(f"frame kernel {kernel!r} is not available here (available: "
+                             f"{', '.join(available_kernels())})")
+        self.kernel = kernel.lower()
         self.bank: Bank = bank.bank if isinstance(bank, NormalisedBank) else bank
         self.store = store if store is not None else FlowStore.for_bank(self.bank)
         self.nb: NormalisedBank = bank if isinstance(bank, NormalisedBank) else normalise(self.bank, cache=self.store)
@@ -321,6 +395,7 @@ class Renderer:
         self._lock = threading.Lock()
         self._local = threading.local()
         self._packed_images: Dict[str, np.ndarray] = {}
+        self._rgbx_images: Dict[str, np.ndarray] = {}
         #: Threads one flow frame is split across. All cores by default (a single frame,
         #: e.g. live playback, comes back sooner); 1 when frames themselves are rendered in
         #: parallel (lipsync render) or when measuring one core.
@@ -338,6 +413,11 @@ class Renderer:
         next call: copy it to keep it.
         """
         self._check(from_viseme, to_viseme, alpha)
+        if out is not None and not out.flags.c_contiguous:
+            # the compiled kernel writes whole rows of a contiguous frame; a strided view
+            # (a frame inside a larger canvas) gets a copy
+            np.copyto(out, self.render(from_viseme, to_viseme, alpha, out=np.empty(out.shape, np.uint8)))
+            return out
         frame = self._frame if out is None else out
         imgs = self.nb.images
         if from_viseme == to_viseme or alpha <= 0.0:
@@ -475,9 +555,45 @@ class Renderer:
     # ------------------------------------------------------------------ methods
     def _flow_frame(self, p: _Pair, alpha: float, out: np.ndarray, out_b: Optional[np.ndarray] = None) -> None:
         """Write the ROI of the frame (or, with ``out_b``, of both warped images) into ``out``."""
+        r = p.roi
+        band = self._bands_avx2(p, alpha, out, out_b) if self.kernel == "avx2" else \
+            self._bands_numba(p, alpha, out, out_b)
+        n = self.frame_threads if (r.y1 - r.y0) >= MIN_ROWS_PER_THREAD * 2 else 1
+        if n <= 1:
+            band(r.y0, r.y1)
+            return
+        # One frame on several threads (the kernels release the GIL): bands of rows.
+        edges = np.linspace(r.y0, r.y1, n + 1).astype(int)
+        for f in [self._band_pool().submit(band, edges[i], edges[i + 1]) for i in range(n)]:
+            f.result()
+
+    def _bands_avx2(self, p: _Pair, alpha: float, out: np.ndarray, out_b: Optional[np.ndarray]):
+        """``band(y0, y1)`` rendering rows of the frame with the compiled kernel.
+
+        The kernel sums the stored tables itself, one coarse row at a time as a band
+        reaches it, so nothing per frame runs outside the (parallel) bands.
+        """
+        ia, ib = p.inv_a, p.inv_b
+        pa, pb = self._rgbx(p.a), self._rgbx(p.b)
+        h, w = self.shape
+        bx, r = p.box, p.roi
+        side_a = _table_args(ia, alpha)
+        side_b = _table_args(ib, 1.0 - alpha)
+        geometry = (w, h, pa.shape[1], ia.data.shape[1], ia.coarse_width, ia.data.shape[2], int(ia.half),
+                    bx.y0, bx.x0, bx.y1 - bx.y0, bx.x1 - bx.x0, ia.step)
+        jobs = [(1.0 - alpha, out)] if out_b is None else [(1.0, out), (0.0, out_b)]
+
+        def band(y0, y1):
+            for wa, dst in jobs:
+                _flowkernel.warp_blend(pa, pb, ia.data, ib.data, dst, dst.strides[0], *geometry,
+                                       y0, y1, r.x0, r.x1, *side_a, *side_b, wa)
+        return band
+
+    def _bands_numba(self, p: _Pair, alpha: float, out: np.ndarray, out_b: Optional[np.ndarray]):
+        """``band(y0, y1)`` rendering rows of the frame with the numba kernel."""
         ia, ib = p.inv_a, p.inv_b
         hc = ia.data.shape[1]
-        da, db, rowbuf, rowfull = self._scratch(hc, ia.coarse_width)
+        da, db, _, _ = self._scratch(hc, ia.coarse_width)
         if hc:
             _fill_coarse(ia, alpha, da)
             _fill_coarse(ib, 1.0 - alpha, db)
@@ -486,22 +602,13 @@ class Renderer:
         box = (bx.y0, bx.x0, bx.y1 - bx.y0, bx.x1 - bx.x0, ia.step)
         jobs = [(int(round((1.0 - alpha) * _BLEND_ONE)), out)] if out_b is None else \
             [(_BLEND_ONE, out), (0, out_b)]  # the two warped images alone: all weight on one side
-        n = self.frame_threads if (r.y1 - r.y0) >= MIN_ROWS_PER_THREAD * 2 else 1
-        if n <= 1:
-            for ka, dst in jobs:
-                _warp_blend_kernel(pa, pb, da, db, *box, r.y0, r.y1, r.x0, r.x1, ka, dst, rowbuf, rowfull)
-            return
-        # One frame on several threads (the kernel releases the GIL): bands of rows, each
-        # thread with its own row buffers; the coarse planes are shared, read-only.
-        edges = np.linspace(r.y0, r.y1, n + 1).astype(int)
 
-        def band(i):
+        def band(y0, y1):
+            # each thread its own row buffers; the coarse planes are shared, read-only
             _, _, rb, rf = self._scratch(hc, ia.coarse_width)
             for ka, dst in jobs:
-                _warp_blend_kernel(pa, pb, da, db, *box, edges[i], edges[i + 1], r.x0, r.x1, ka, dst, rb, rf)
-
-        for f in [self._band_pool().submit(band, i) for i in range(n)]:
-            f.result()
+                _warp_blend_kernel(pa, pb, da, db, *box, y0, y1, r.x0, r.x1, ka, dst, rb, rf)
+        return band
 
     def _band_pool(self):
         with self._lock:
@@ -510,6 +617,12 @@ class Renderer:
 
                 self._pool = ThreadPoolExecutor(self.frame_threads, thread_name_prefix="lipsync-band")
             return self._pool
+
+    def _rgbx(self, v: str) -> np.ndarray:
+        got = self._rgbx_images.get(v)
+        if got is None:
+            got = self._rgbx_images[v] = pack_rgbx(self.nb.images[v])
+        return got
 
     def _packed(self, v: str) -> np.ndarray:
         got = self._packed_images.get(v)
@@ -539,6 +652,12 @@ class Renderer:
             m = beier_neely_map(self.shape, dst_lines=lines, src_lines=nb.lines[src], a=w.a, b=w.b, p=w.p)
             cv2.remap(nb.images[src], m, None, cv2.INTER_LINEAR, dst=out, borderMode=cv2.BORDER_REPLICATE)
         return self._full_a, self._full_b
+
+
+def _table_args(inv: InverseTables, t: float) -> Tuple[Tuple[int, ...], Tuple[float, ...]]:
+    """The compiled kernel's view of :func:`table_weights`: indices, weights over the scale."""
+    idx, wts = table_weights(t, inv.steps)
+    return tuple(int(i) for i in idx), tuple(float(v) / inv.scale for v in wts)
 
 
 def _fill_coarse(inv: InverseTables, t: float, out: np.ndarray) -> None:
