@@ -1,0 +1,175 @@
+"""The flow method's frame kernels against a plain numpy reference written here.
+
+A flow frame is defined by the coarse inverse maps the renderer reports
+(``Renderer.inverse_map``): upsample them linearly to pixels (coarse point (i, j) at the
+centre of its step x step block, edges repeated), sample both images bilinearly at
+``Y + d(Y)`` (positions clamped to the image), blend with (1 - alpha, alpha). Every kernel
+must give that frame; the compiled one to within rounding.
+"""
+
+import os
+import shutil
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+import synthetic
+from lipsync import render as render_mod
+from lipsync.bank import Bank
+from lipsync.errors import InputError, UnknownNameError
+from lipsync.render import Renderer, available_kernels, pack_rgbx
+
+needs_avx2 = pytest.mark.skipif("avx2" not in available_kernels(),
+                                reason="compiled kernel not built or CPU without AVX2")
+
+
+def _upsample(coarse: np.ndarray, shape, step: int) -> np.ndarray:
+    """Separable linear interpolation of a coarse grid to ``shape`` pixels (np.interp clamps)."""
+    hc, wc = coarse.shape[:2]
+    h, w = shape
+    cy = np.arange(hc) * step + (step - 1) / 2.0
+    cx = np.arange(wc) * step + (step - 1) / 2.0
+    out = np.empty((h, w, 2))
+    for c in range(2):
+        cols = np.stack([np.interp(np.arange(h), cy, coarse[:, j, c]) for j in range(wc)], axis=1)
+        out[..., c] = np.stack([np.interp(np.arange(w), cx, cols[i]) for i in range(h)])
+    return out
+
+
+def _bilinear(img: np.ndarray, px: np.ndarray, py: np.ndarray) -> np.ndarray:
+    h, w = img.shape[:2]
+    px = np.clip(px, 0, w - 1)
+    py = np.clip(py, 0, h - 1)
+    x0 = np.floor(px).astype(int)
+    y0 = np.floor(py).astype(int)
+    x1 = np.minimum(x0 + 1, w - 1)
+    y1 = np.minimum(y0 + 1, h - 1)
+    fx = (px - x0)[..., None]
+    fy = (py - y0)[..., None]
+    f = img.astype(np.float64)
+    return ((1 - fx) * (1 - fy) * f[y0, x0] + fx * (1 - fy) * f[y0, x1]
+            + (1 - fx) * fy * f[y1, x0] + fx * fy * f[y1, x1])
+
+
+def reference_frame(r: Renderer, a: str, b: str, alpha: float) -> np.ndarray:
+    """The flow frame from the renderer's own coarse maps, in float64 numpy."""
+    pair = r._pair(a, b)
+    h, w = r.shape
+    ys, xs = np.mgrid[0:h, 0:w].astype(np.float64)
+    parts = []
+    for side, t, img in (("a", alpha, r.nb.images[a]), ("b", 1.0 - alpha, r.nb.images[b])):
+        d = np.zeros((h, w, 2))
+        bx = pair.box
+        if not bx.empty:
+            coarse = r.inverse_map(a, b, t, side)
+            d[bx.y0:bx.y1, bx.x0:bx.x1] = _upsample(coarse, (bx.y1 - bx.y0, bx.x1 - bx.x0), pair.inv_a.step)
+        parts.append(_bilinear(img, xs + d[..., 0], ys + d[..., 1]))
+    return np.floor((1 - alpha) * parts[0] + alpha * parts[1] + 0.5).clip(0, 255).astype(np.uint8)
+
+
+@pytest.fixture(scope="module")
+def banks(tmp_path_factory):
+    root = tmp_path_factory.mktemp("kernel")
+    # the synthetic subject; an odd-sized crop of it (scalar tails, an axis on a column);
+    # and one without symmetry (full-width tables)
+    full = synthetic.write_bank(root / "full", {k: synthetic.SHAPES[k] for k in ("X", "O", "E")})
+    odd = root / "odd"
+    shutil.copytree(full, odd)
+    import cv2
+    import yaml
+
+    spec = yaml.safe_load((odd / "bank.yaml").read_text())
+    for v in spec["visemes"].values():
+        img = cv2.imread(str(odd / v["image"]))
+        cv2.imwrite(str(odd / v["image"]), img[:157, 4:187])   # 157 x 183: x -> x - 4
+        v["lines"] = {n: [[x - 4, y] for x, y in line] for n, line in v["lines"].items()}
+    (odd / "bank.yaml").write_text(yaml.safe_dump(spec, sort_keys=False))
+    asym = synthetic.write_bank(root / "asym", {k: synthetic.SHAPES[k] for k in ("X", "O", "E")}, symmetry=False)
+    return {"full": Bank.load(full), "odd": Bank.load(odd), "asym": Bank.load(asym)}
+
+
+@pytest.mark.parametrize("kernel", ["avx2", "numba"])
+@pytest.mark.parametrize("which", ["full", "odd", "asym"])
+def test_kernel_matches_the_numpy_reference(banks, kernel, which):
+    if kernel not in available_kernels():
+        pytest.skip(f"{kernel} kernel not available here")
+    bank = banks[which]
+    r = Renderer(bank, kernel=kernel)
+    # numba rounds positions to 1/64 px: within 2 levels; the compiled kernel is float32
+    # all the way: within 1 (rounding at the .5 boundary)
+    tol = 1 if kernel == "avx2" else 2
+    for a, b in (("X", "O"), ("O", "E"), ("E", "X")):
+        for alpha in (0.2, 0.5, 0.85):
+            got = r.render(a, b, alpha).astype(int)
+            want = reference_frame(r, a, b, alpha).astype(int)
+            diff = np.abs(got - want)
+            assert diff.max() <= tol, (which, a, b, alpha, diff.max())
+            assert (diff > 0).mean() < 0.02, (which, a, b, alpha, (diff > 0).mean())
+
+
+@needs_avx2
+def test_kernels_agree_and_threads_do_not_change_frames(banks):
+    bank = banks["full"]
+    fast, slow = Renderer(bank, kernel="avx2"), Renderer(bank, kernel="numba")
+    banded = Renderer(bank, kernel="avx2")
+    banded.frame_threads = 3
+    for a, b in (("X", "O"), ("E", "O")):
+        for alpha in np.linspace(0.05, 0.95, 7):
+            f = fast.render(a, b, float(alpha)).copy()
+            assert np.abs(f.astype(int) - slow.render(a, b, float(alpha))).max() <= 2
+            np.testing.assert_array_equal(banded.render(a, b, float(alpha)), f)
+            wa, wb, _ = fast.parts(a, b, float(alpha))
+            na, nb, _ = slow.parts(a, b, float(alpha))
+            assert np.abs(wa.astype(int) - na).max() <= 2 and np.abs(wb.astype(int) - nb).max() <= 2
+
+
+@needs_avx2
+def test_a_strided_output_gets_the_same_frame(banks):
+    bank = banks["odd"]
+    r = Renderer(bank, kernel="avx2")
+    h, w = bank.shape
+    canvas = np.full((h + 4, w + 6, 3), 7, np.uint8)
+    view = canvas[2:2 + h, 3:3 + w]
+    r.render("X", "O", 0.4, out=view)
+    np.testing.assert_array_equal(view, r.render("X", "O", 0.4))
+    assert (canvas[:2] == 7).all() and (canvas[:, :3] == 7).all()  # nothing outside the view
+
+
+@needs_avx2
+def test_the_compiled_kernel_refuses_geometry_that_would_leave_its_buffers():
+    from lipsync import _flowkernel
+
+    img = pack_rgbx(np.zeros((8, 8, 3), np.uint8))
+    tab = np.zeros((4, 4, 4, 2), np.int16)
+    out = np.zeros((8, 8, 3), np.uint8)
+    ok = dict(w=8, h=8, wp=9, hc=4, wc=4, keep=4, half=0, by0=0, bx0=0, bh=8, bw=8, step=2,
+              ry0=0, ry1=8, rx0=0, rx1=8)
+
+    def call(**kw):
+        g = dict(ok, **kw)
+        _flowkernel.warp_blend(img, img, tab, tab, out, out.strides[0], *g.values(),
+                               (0, -1, -1, -1), (1 / 64, 0, 0, 0), (3, -1, -1, -1), (1 / 64, 0, 0, 0), 0.5)
+
+    call()  # sound
+    for bad in (dict(ry1=9), dict(rx1=9), dict(h=9), dict(wp=8), dict(bw=9), dict(keep=5), dict(hc=5)):
+        with pytest.raises(ValueError):
+            call(**bad)
+    with pytest.raises(ValueError):  # a table index past the tables given
+        _flowkernel.warp_blend(img, img, tab, tab, out, out.strides[0], *ok.values(),
+                               (4, -1, -1, -1), (1.0, 0, 0, 0), (0, -1, -1, -1), (1.0, 0, 0, 0), 0.5)
+
+
+def test_unknown_or_unavailable_kernels_are_refused(banks, monkeypatch):
+    with pytest.raises(UnknownNameError, match="avx2"):
+        Renderer(banks["full"], kernel="gpu")
+    monkeypatch.setenv("LIPSYNC_KERNEL", "nope")
+    with pytest.raises(UnknownNameError, match="numba"):
+        render_mod.default_kernel()
+    monkeypatch.setenv("LIPSYNC_KERNEL", "numba")
+    assert Renderer(banks["full"]).kernel == "numba"
+    monkeypatch.setattr(render_mod, "_flowkernel", None)
+    monkeypatch.setenv("LIPSYNC_KERNEL", "avx2")
+    with pytest.raises(InputError, match="not available"):
+        render_mod.default_kernel()
