@@ -1,6 +1,12 @@
 """Package discovery and the optional compiled kernel; everything else is in pyproject.toml."""
 
+import os
+
 from setuptools import Extension, find_packages, setup
+
+# Python's own CFLAGS carry -fwrapv and -fno-strict-aliasing (for CPython's sources); the
+# kernel relies on neither, and with them its pixel loop measured 10-17% slower.
+_CFLAGS = ["/O2"] if os.name == "nt" else ["-O3", "-std=c99", "-Wall", "-fno-wrapv", "-fstrict-aliasing"]
 
 setup(
     packages=find_packages(include=["lipsync", "lipsync.*"]) + ["lipsync._visemes", "lipsync._configs"],
@@ -8,5 +14,5 @@ setup(
     # The flow renderer's frame kernel (AVX2 gathers, chosen at run time by CPU). optional:
     # without a C compiler the build warns and the renderer uses its numba kernel instead.
     ext_modules=[Extension("lipsync._flowkernel", ["lipsync/_flowkernel.c"], optional=True,
-                           extra_compile_args=["-O3", "-std=c99", "-Wall"])],
+                           extra_compile_args=_CFLAGS)],
 )

@@ -98,42 +98,6 @@ static void coarse_row(const job_t *j, int side, int i, float *cx, float *cy)
     coarse_row_plain(j, side, i, cx, cy);
 }
 
-/* Per-band cache of the two coarse rows an output row lies between (each serves
- * about `step` output rows). */
-typedef struct {
-    int row[2];          /* coarse row held in slot s, -1 if none */
-    float *data[2];      /* slot s: ax, ay, bx, by planes of wc floats each */
-} coarse_cache_t;
-
-static const float *coarse_get(const job_t *j, coarse_cache_t *cc, int i)
-{
-    for (int s = 0; s < 2; s++)
-        if (cc->row[s] == i) return cc->data[s];
-    /* replace the slot not holding the other row this output row needs (rows only grow) */
-    int s = (cc->row[0] < cc->row[1]) ? 0 : 1;
-    float *d = cc->data[s];
-    coarse_row(j, 0, i, d, d + j->wc);
-    coarse_row(j, 1, i, d + 2 * j->wc, d + 3 * j->wc);
-    cc->row[s] = i;
-    return d;
-}
-
-/* Coarse rows of both fields lerped vertically for output row y: four planar rows. */
-static void coarse_rows(const job_t *j, coarse_cache_t *cc, int y, float *out)
-{
-    int yl = y - j->by0;
-    float cy = ((float)yl + 0.5f) / (float)j->step - 0.5f;
-    if (cy < 0.f) cy = 0.f;
-    if (cy > (float)(j->hc - 1)) cy = (float)(j->hc - 1);
-    int i0 = (int)cy;
-    float fy = cy - (float)i0;
-    int i1 = i0 + 1 < j->hc ? i0 + 1 : j->hc - 1;
-    const float *r0 = coarse_get(j, cc, i0);
-    const float *r1 = coarse_get(j, cc, i1);
-    int n = 4 * j->wc;
-    for (int c = 0; c < n; c++) out[c] = r0[c] + fy * (r1[c] - r0[c]);
-}
-
 /* Horizontal upsampling of one coarse row to the box's bw pixels, any step. */
 static void upsample_generic(const float *c, int wc, int bw, int step, float *dst)
 {
@@ -185,40 +149,83 @@ static void upsample2_avx2(const float *c, int wc, int bw, float *dst)
 }
 #endif
 
-/* The four displacement planes of output row y over the ROI columns (zero outside the box). */
-static void displacement_row(const job_t *j, coarse_cache_t *cc, int y, float *coarse, float **planes)
+/* Per-band cache of the two coarse rows an output row lies between, each already
+ * upsampled to the ROI's width (zero outside the box): a coarse row is combined and
+ * upsampled once for the `step` output rows that use it, and the vertical lerp is done
+ * by the pixel loop itself as it reads them. */
+typedef struct {
+    int row[2];          /* coarse row held in slot s, -1 if none */
+    float *data[2];      /* slot s: planes ax, ay, bx, by of `stride` floats each */
+    float *zero;         /* all-zero planes, for rows outside the box */
+    float *coarse;       /* 4 * wc: the combined coarse row before upsampling */
+    int stride;
+} cache_t;
+
+static void upsample(const job_t *j, const float *c, float *dst)
 {
-    int rw = j->rx1 - j->rx0;
-    int yl = y - j->by0;
-    for (int p = 0; p < 4; p++) memset(planes[p], 0, sizeof(float) * (size_t)rw);
-    if (j->hc <= 0 || yl < 0 || yl >= j->bh) return;
-    float *cs[4] = {coarse, coarse + j->wc, coarse + 2 * j->wc, coarse + 3 * j->wc};
-    coarse_rows(j, cc, y, coarse);
-    int off = j->bx0 - j->rx0;   /* the box lies inside the ROI */
-    for (int p = 0; p < 4; p++) {
-        float *dst = planes[p] + off;
-        if (j->step == 2) {
+    if (j->step == 2) {
 #if LS_X86
-            if (j->simd) upsample2_avx2(cs[p], j->wc, j->bw, dst);
-            else
+        if (j->simd) { upsample2_avx2(c, j->wc, j->bw, dst); return; }
 #endif
-                upsample2_scalar(cs[p], j->wc, j->bw, dst);
-        } else {
-            upsample_generic(cs[p], j->wc, j->bw, j->step, dst);
-        }
+        upsample2_scalar(c, j->wc, j->bw, dst);
+    } else {
+        upsample_generic(c, j->wc, j->bw, j->step, dst);
     }
+}
+
+static const float *coarse_get(const job_t *j, cache_t *cc, int i)
+{
+    for (int s = 0; s < 2; s++)
+        if (cc->row[s] == i) return cc->data[s];
+    /* replace the slot not holding the other row this output row needs (rows only grow) */
+    int s = (cc->row[0] < cc->row[1]) ? 0 : 1;
+    float *c = cc->coarse, *d = cc->data[s];
+    coarse_row(j, 0, i, c, c + j->wc);
+    coarse_row(j, 1, i, c + 2 * j->wc, c + 3 * j->wc);
+    int off = j->bx0 - j->rx0;   /* the box lies inside the ROI */
+    for (int p = 0; p < 4; p++) upsample(j, c + (size_t)p * j->wc, d + (size_t)p * cc->stride + off);
+    cc->row[s] = i;
+    return d;
+}
+
+/* The two upsampled rows output row y lies between, and its weight on the second. */
+static void rows_for(const job_t *j, cache_t *cc, int y, const float **r0, const float **r1, float *fy)
+{
+    int yl = y - j->by0;
+    if (j->hc <= 0 || yl < 0 || yl >= j->bh) {
+        *r0 = *r1 = cc->zero;
+        *fy = 0.f;
+        return;
+    }
+    float cy = ((float)yl + 0.5f) / (float)j->step - 0.5f;
+    if (cy < 0.f) cy = 0.f;
+    if (cy > (float)(j->hc - 1)) cy = (float)(j->hc - 1);
+    int i0 = (int)cy;
+    int i1 = i0 + 1 < j->hc ? i0 + 1 : j->hc - 1;
+    *fy = cy - (float)i0;
+    *r0 = coarse_get(j, cc, i0);
+    *r1 = coarse_get(j, cc, i1);
 }
 
 /* ---------------------------------------------------------------- pixels */
 
-static inline void pixel_scalar(const job_t *j, int x, int y, const float *const *planes, int o, uint8_t *dst)
+/* Row y's displacements: r0, r1 hold planes ax, ay, bx, by (`stride` apart), lerped by fy. */
+typedef struct {
+    const float *r0, *r1;
+    float fy;
+    int stride;
+} rows_t;
+
+static inline void pixel_scalar(const job_t *j, int x, int y, const rows_t *rw, int o, uint8_t *dst)
 {
     float acc[3] = {0.f, 0.f, 0.f};
     const float xmax = (float)(j->w - 1), ymax = (float)(j->h - 1);
     for (int side = 0; side < 2; side++) {
         const uint32_t *img = side ? j->pb : j->pa;
         float k = side ? 1.f - j->wa : j->wa;
-        float px = (float)x + planes[2 * side][o], py = (float)y + planes[2 * side + 1][o];
+        const float *a0 = rw->r0 + (size_t)(2 * side) * rw->stride + o, *a1 = rw->r1 + (size_t)(2 * side) * rw->stride + o;
+        const float *b0 = a0 + rw->stride, *b1 = a1 + rw->stride;
+        float px = (float)x + (*a0 + rw->fy * (*a1 - *a0)), py = (float)y + (*b0 + rw->fy * (*b1 - *b0));
         px = px < 0.f ? 0.f : (px > xmax ? xmax : px);
         py = py < 0.f ? 0.f : (py > ymax ? ymax : py);
         float x0 = floorf(px), y0 = floorf(py);
@@ -235,12 +242,12 @@ static inline void pixel_scalar(const job_t *j, int x, int y, const float *const
     }
 }
 
-static void row_scalar(const job_t *j, int y, const float *const *planes, int o0, int o1)
+static void row_scalar(const job_t *j, int y, const rows_t *rw, int o0, int o1)
 {
     uint8_t *row = j->out + (size_t)y * j->out_stride;
     for (int o = o0; o < o1; o++) {
         int x = j->rx0 + o;
-        pixel_scalar(j, x, y, planes, o, row + 3 * (size_t)x);
+        pixel_scalar(j, x, y, rw, o, row + 3 * (size_t)x);
     }
 }
 
@@ -279,9 +286,12 @@ static inline void sample8(const uint32_t *img, int wp, __m256 px, __m256 py, __
 }
 
 __attribute__((target("avx2,fma")))
-static void row_avx2(const job_t *j, int y, const float *const *planes)
+static void row_avx2(const job_t *j, int y, const rows_t *rows)
 {
     int rw = j->rx1 - j->rx0;
+    const float *u0 = rows->r0, *u1 = rows->r1;
+    const size_t st = (size_t)rows->stride;
+    const __m256 vy = _mm256_set1_ps(rows->fy);
     uint8_t *row = j->out + (size_t)y * j->out_stride + 3 * (size_t)j->rx0;
     const __m256 zero = _mm256_setzero_ps();
     const __m256 xmax = _mm256_set1_ps((float)(j->w - 1)), ymax = _mm256_set1_ps((float)(j->h - 1));
@@ -295,13 +305,16 @@ static void row_avx2(const job_t *j, int y, const float *const *planes)
     for (; o + 8 <= rw; o += 8) {
         __m256 fx = _mm256_add_ps(_mm256_set1_ps((float)(j->rx0 + o)), lane);
         __m256 acc[3] = {zero, zero, zero};
-        __m256 ax = _mm256_add_ps(fx, _mm256_loadu_ps(planes[0] + o));
-        __m256 ay = _mm256_add_ps(fy, _mm256_loadu_ps(planes[1] + o));
+#define LS_DISP(p) _mm256_fmadd_ps(vy, _mm256_sub_ps(_mm256_loadu_ps(u1 + (p) * st + o), _mm256_loadu_ps(u0 + (p) * st + o)), \
+                                  _mm256_loadu_ps(u0 + (p) * st + o))
+        __m256 ax = _mm256_add_ps(fx, LS_DISP(0));
+        __m256 ay = _mm256_add_ps(fy, LS_DISP(1));
         ax = _mm256_min_ps(_mm256_max_ps(ax, zero), xmax);
         ay = _mm256_min_ps(_mm256_max_ps(ay, zero), ymax);
         sample8(j->pa, j->wp, ax, ay, ka, acc);
-        __m256 bx = _mm256_add_ps(fx, _mm256_loadu_ps(planes[2] + o));
-        __m256 by = _mm256_add_ps(fy, _mm256_loadu_ps(planes[3] + o));
+        __m256 bx = _mm256_add_ps(fx, LS_DISP(2));
+        __m256 by = _mm256_add_ps(fy, LS_DISP(3));
+#undef LS_DISP
         bx = _mm256_min_ps(_mm256_max_ps(bx, zero), xmax);
         by = _mm256_min_ps(_mm256_max_ps(by, zero), ymax);
         sample8(j->pb, j->wp, bx, by, kb, acc);
@@ -321,7 +334,7 @@ static void row_avx2(const job_t *j, int y, const float *const *planes)
         v = (uint32_t)_mm_extract_epi32(hi, 2);
         memcpy(d + 20, &v, 4);
     }
-    if (o < rw) row_scalar(j, y, planes, o, rw);
+    if (o < rw) row_scalar(j, y, rows, o, rw);
 }
 
 static int have_avx2(void)
@@ -386,20 +399,22 @@ static PyObject *warp_blend(PyObject *self, PyObject *args)
     j.pa = pa.buf; j.pb = pb.buf; j.ta = ta.buf; j.tb = tb.buf; j.out = out.buf;
     if (rw <= 0 || j.ry1 <= j.ry0) { result = Py_None; Py_INCREF(result); goto done; }
     j.simd = simd && have_avx2();
-    size_t nc = (size_t)4 * (j.wc + 8);
-    scratch = malloc(sizeof(float) * (3 * nc + (size_t)4 * (rw + 8)));
+    size_t stride = (size_t)rw + 8;
+    /* zeroed once: the planes' columns outside the box are never written */
+    scratch = calloc((size_t)4 * (j.wc + 8) + 12 * stride, sizeof(float));
     if (!scratch) { PyErr_NoMemory(); goto done; }
     Py_BEGIN_ALLOW_THREADS
-    coarse_cache_t cc = {{-1, -1}, {scratch + nc, scratch + 2 * nc}};
-    float *planes[4];
-    for (int p = 0; p < 4; p++) planes[p] = scratch + 3 * nc + (size_t)p * (rw + 8);
+    cache_t cc = {{-1, -1}, {scratch + 4 * stride, scratch + 8 * stride}, scratch,
+                  scratch + 12 * stride, (int)stride};
+    rows_t rows;
+    rows.stride = (int)stride;
     for (int y = j.ry0; y < j.ry1; y++) {
-        displacement_row(&j, &cc, y, scratch, planes);
+        rows_for(&j, &cc, y, &rows.r0, &rows.r1, &rows.fy);
 #if LS_X86
-        if (j.simd) row_avx2(&j, y, (const float *const *)planes);
+        if (j.simd) row_avx2(&j, y, &rows);
         else
 #endif
-            row_scalar(&j, y, (const float *const *)planes, 0, rw);
+            row_scalar(&j, y, &rows, 0, rw);
     }
     Py_END_ALLOW_THREADS
     result = Py_None;

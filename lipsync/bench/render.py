@@ -230,8 +230,10 @@ def bench_methods(rows: List[dict], banks: Dict[str, Path], quick: bool) -> None
         store = FlowStore.for_bank(bank)
         preprocess(bank, store=store, quiet=True)
         row = {"figure": "frame", "size": label, "lines": len(bank.line_names)}
-        for method in METHODS.names():
-            r = Renderer(bank, method=method, store=store)
+        for method in METHODS.names() + ["flow-numba"]:
+            # flow-numba: the flow method on the portable kernel, beside the compiled one
+            kernel = "numba" if method == "flow-numba" else None
+            r = Renderer(bank, method=method.replace("-numba", ""), store=store, kernel=kernel)
             alphas = np.linspace(0.1, 0.9, 3 if (quick or method == "beier-neely") else 9)
 
             def frames():
@@ -258,6 +260,7 @@ def bench_methods(rows: List[dict], banks: Dict[str, Path], quick: bool) -> None
         row["memcpy_ms"] = round(median_ms(copy_bytes, 50), 3)
         row["beier_neely_over_flow"] = round(row["beier-neely_ms"] / row["flow_ms"], 1)
         row["flow_over_memcpy"] = round(row["flow_ms"] / row["memcpy_ms"], 1)
+        row["numba_over_flow"] = round(row["flow-numba_ms"] / row["flow_ms"], 2)
         rows.append(row)
 
 
@@ -373,7 +376,7 @@ def bench_whole_frame(rows: List[dict], banks: Dict[str, Path], quick: bool) -> 
     """Flow frame vs classic Beier-Neely frame vs memory copy, one core, whole-frame motion."""
     import cv2
 
-    from ..render import Renderer
+    from ..render import Renderer, available_kernels
 
     threads = cv2.getNumThreads()
     cv2.setNumThreads(1)  # one core: the classic warp's cv2.remap would otherwise use both
@@ -381,21 +384,27 @@ def bench_whole_frame(rows: List[dict], banks: Dict[str, Path], quick: bool) -> 
         pairs = [("X", "D"), ("A", "C"), ("B", "F"), ("E", "H")]
         for label, path in banks.items():
             bank, store, prep_s = _preprocessed(path)
-            flow = Renderer(bank, store=store)
-            flow.frame_threads = 1  # one core
             out = np.empty(bank.shape + (3,), np.uint8)
             alphas = np.linspace(0.1, 0.9, 9)
-            for a, b in pairs:  # warm-up: pair states, compiled kernels
-                flow.render(a, b, 0.5, out=out)
-
-            def flow_frames():
-                for a, b in pairs:
-                    for al in alphas:
-                        flow.render(a, b, float(al), out=out)
-
             n_frames = len(pairs) * len(alphas)
-            flow_ms = median_ms(flow_frames, 3 if quick else 7, warmup=0) / n_frames
-            flow_cpu = median_ms(flow_frames, 3 if quick else 7, warmup=0, clock=time.thread_time) / n_frames
+            kernel_ms = {}
+            for kernel in available_kernels():  # the default (fastest) first
+                flow = Renderer(bank, store=store, kernel=kernel)
+                flow.frame_threads = 1  # one core
+                for a, b in pairs:  # warm-up: pair states, compiled kernels
+                    flow.render(a, b, 0.5, out=out)
+
+                def flow_frames(flow=flow):
+                    for a, b in pairs:
+                        for al in alphas:
+                            flow.render(a, b, float(al), out=out)
+
+                kernel_ms[kernel] = median_ms(flow_frames, 3 if quick else 7, warmup=0) / n_frames
+                if kernel == available_kernels()[0]:
+                    flow_ms = kernel_ms[kernel]
+                    flow_cpu = median_ms(flow_frames, 3 if quick else 7, warmup=0, clock=time.thread_time) / n_frames
+                    default = flow
+            flow = default
             classic = Renderer(bank, method="beier-neely", store=store)
             bn_ms = median_ms(lambda: classic.render("X", "D", 0.4), 1 if quick else 3)
             bn_cpu = median_ms(lambda: classic.render("X", "D", 0.4), 1 if quick else 3, clock=time.thread_time)
@@ -433,6 +442,9 @@ def bench_whole_frame(rows: List[dict], banks: Dict[str, Path], quick: bool) -> 
             roi = pair.roi
             rows.append({
                 "figure": "whole_frame", "size": label, "lines": len(bank.line_names),
+                "kernel": available_kernels()[0],
+                "numba_kernel_ms": round(kernel_ms["numba"], 3),
+                "numba_over_kernel": round(kernel_ms["numba"] / flow_ms, 2),
                 "moving_fraction": round((roi.y1 - roi.y0) * (roi.x1 - roi.x0) / (bank.shape[0] * bank.shape[1]), 2),
                 "flow_ms": round(flow_ms, 3), "fps_one_core": round(1000.0 / flow_ms, 1),
                 "beier_neely_ms": round(bn_ms, 1), "beier_neely_over_flow": round(bn_ms / flow_ms, 1),
