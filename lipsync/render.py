@@ -16,9 +16,9 @@ Methods (registry :data:`METHODS`):
     bilinearly, samples both images and blends: about two image lookups and a blend per
     pixel, whatever the subject. Only the box where the (dead-zoned) flows are non-zero or
     the images differ is rendered; the rest of the frame is the common background. The
-    pass is compiled C with AVX2 gathers (:mod:`lipsync._flowkernel`, chosen at run time
-    by CPU); without it (no compiler at install, or a CPU without AVX2) a numba kernel
-    does the same in fixed point (:data:`KERNELS`).
+    pass is compiled C with AVX-512 or AVX2 gathers (:mod:`lipsync._flowkernel`, chosen
+    at run time by CPU); without it (no compiler at install, or a CPU without AVX2) a numba
+    kernel does the same in fixed point (:data:`KERNELS`).
 ``splat``
     The paper's forward mapping: every pixel of A is carried to ``X + alpha F(X)``. The
     paper rounds that to the nearest pixel; here each pixel is shared bilinearly among the
@@ -68,13 +68,15 @@ try:  # built by setup.py when a C compiler was there; optional
 except ImportError:  # pragma: no cover - depends on the install
     _flowkernel = None
 
-#: Frame kernels of the flow method, fastest first. "avx2": compiled C, eight pixels at a
-#: time with gathers (about 3x less CPU per frame than numba on whole-frame motion,
+#: Frame kernels of the flow method, fastest first, with the compiled kernel's level.
+#: "avx512" and "avx2": compiled C, 16 or 8 pixels at a time with gathers, identical
+#: frames (on whole-frame motion at 512x512, 4.3x and 3.2x less CPU per frame than numba,
 #: measured side by side by the bench figure "whole_frame"); "numba": portable fixed
 #: point, one pixel at a time.
-KERNELS: Registry[str] = Registry("frame kernel")
-KERNELS.register("avx2", "compiled C with AVX2 gathers (x86-64 CPUs since 2013)")
-KERNELS.register("numba", "numba, one pixel at a time (any CPU)")
+KERNELS: Registry[int] = Registry("frame kernel")
+KERNELS.register("avx512", 2)   # x86-64 with AVX-512 F/BW/DQ/VL (Intel servers since 2017, AMD Zen 4)
+KERNELS.register("avx2", 1)     # x86-64 with AVX2 + FMA (Intel since 2013, AMD since 2015)
+KERNELS.register("numba", 0)    # any CPU numba runs on
 
 
 def available_kernels() -> list:
@@ -85,8 +87,8 @@ def available_kernels() -> list:
     >>> "numba" in available_kernels()
     True
     """
-    fast = _flowkernel is not None and _flowkernel.simd_available()
-    return (["avx2"] if fast else []) + ["numba"]
+    level = _flowkernel.simd_available() if _flowkernel is not None else 0
+    return [name for name in KERNELS.names() if KERNELS.get(name) <= level]
 
 
 def default_kernel() -> str:
@@ -556,8 +558,8 @@ class Renderer:
     def _flow_frame(self, p: _Pair, alpha: float, out: np.ndarray, out_b: Optional[np.ndarray] = None) -> None:
         """Write the ROI of the frame (or, with ``out_b``, of both warped images) into ``out``."""
         r = p.roi
-        band = self._bands_avx2(p, alpha, out, out_b) if self.kernel == "avx2" else \
-            self._bands_numba(p, alpha, out, out_b)
+        band = self._bands_numba(p, alpha, out, out_b) if self.kernel == "numba" else \
+            self._bands_compiled(p, alpha, out, out_b)
         n = self.frame_threads if (r.y1 - r.y0) >= MIN_ROWS_PER_THREAD * 2 else 1
         if n <= 1:
             band(r.y0, r.y1)
@@ -567,7 +569,7 @@ class Renderer:
         for f in [self._band_pool().submit(band, edges[i], edges[i + 1]) for i in range(n)]:
             f.result()
 
-    def _bands_avx2(self, p: _Pair, alpha: float, out: np.ndarray, out_b: Optional[np.ndarray]):
+    def _bands_compiled(self, p: _Pair, alpha: float, out: np.ndarray, out_b: Optional[np.ndarray]):
         """``band(y0, y1)`` rendering rows of the frame with the compiled kernel.
 
         The kernel sums the stored tables itself, one coarse row at a time as a band
@@ -582,11 +584,12 @@ class Renderer:
         geometry = (w, h, pa.shape[1], ia.data.shape[1], ia.coarse_width, ia.data.shape[2], int(ia.half),
                     bx.y0, bx.x0, bx.y1 - bx.y0, bx.x1 - bx.x0, ia.step)
         jobs = [(1.0 - alpha, out)] if out_b is None else [(1.0, out), (0.0, out_b)]
+        level = KERNELS.get(self.kernel)
 
         def band(y0, y1):
             for wa, dst in jobs:
                 _flowkernel.warp_blend(pa, pb, ia.data, ib.data, dst, dst.strides[0], *geometry,
-                                       y0, y1, r.x0, r.x1, *side_a, *side_b, wa)
+                                       y0, y1, r.x0, r.x1, *side_a, *side_b, wa, level)
         return band
 
     def _bands_numba(self, p: _Pair, alpha: float, out: np.ndarray, out_b: Optional[np.ndarray]):
