@@ -297,11 +297,22 @@ class Bank:
         return self.path / "bank.yaml"
 
     def image_digest(self, viseme: str) -> str:
-        """sha256 of a viseme's decoded pixels (what the flow store keys on)."""
+        """sha256 of a viseme's decoded pixels (what the flow store keys on).
+
+        Kept per image object: every pair key needs two, and hashing a 720p image costs
+        about a millisecond (a clip checks all pairs' keys before rendering). Images are
+        never changed in place; a new array (a new bank) is hashed anew.
+        """
         img = self.images[viseme]
+        cache = self.__dict__.setdefault("_digest_cache", {})  # frozen: no setattr
+        got = cache.get(viseme)
+        if got is not None and got[0] is img:
+            return got[1]
         h = hashlib.sha256(repr(img.shape).encode())
-        h.update(img.tobytes())
-        return h.hexdigest()
+        h.update(np.ascontiguousarray(img).data)
+        digest = h.hexdigest()
+        cache[viseme] = (img, digest)
+        return digest
 
     @classmethod
     def load(cls, path: Union[str, os.PathLike]) -> "Bank":
