@@ -6,7 +6,8 @@ STAMP   := $(VENV)/.installed
 
 .PHONY: test test-browser demo bench fuzz docs-images clean install
 
-$(STAMP): pyproject.toml setup.py
+# The compiled frame kernel is built by the editable install: a changed source rebuilds it.
+$(STAMP): pyproject.toml setup.py lipsync/_flowkernel.c
 	$(PY) -m venv $(VENV)
 	$(BIN)/pip install -q --upgrade pip
 	$(BIN)/pip install -q -e '.[test]'
