@@ -202,3 +202,58 @@ def test_the_default_kernel_keeps_the_synthetic_quality(tmp_path):
                 scores.append(mouth_psnr(r.render(a, b, alpha), truth))
             mean[k] = float(np.mean(scores))
         assert abs(mean[default] - mean["numba"]) < 0.1, (a, b, mean)
+
+
+def _reference_from_tables(img_a, img_b, tabs, sides, box, step, half, wc, wa):
+    """warp_blend's contract in numpy: tables summed with their weights, mirrored, upsampled,
+    both images sampled bilinearly and blended (rows and columns outside the box: no motion)."""
+    h, w = img_a.shape[:2]
+    y0, x0, bh, bw = box
+    ys, xs = np.mgrid[0:h, 0:w].astype(np.float64)
+    parts = []
+    for img, tab, (idx, wts) in zip((img_a, img_b), tabs, sides):
+        coarse = np.zeros(tab.shape[1:3] + (2,))
+        for k, wt in zip(idx, wts):
+            if k >= 0:
+                coarse += wt * tab[k].astype(np.float64)
+        if half:
+            full = np.zeros((coarse.shape[0], wc, 2))
+            keep = coarse.shape[1]
+            full[:, wc - keep:] = coarse[:, ::-1] * [-1, 1]   # mirrored columns, x negated
+            full[:, :keep] = coarse                            # the middle column keeps its own
+            coarse = full
+        d = np.zeros((h, w, 2))
+        d[y0:y0 + bh, x0:x0 + bw] = _upsample(coarse, (bh, bw), step)
+        parts.append(_bilinear(img, xs + d[..., 0], ys + d[..., 1]))
+    return np.floor(wa * parts[0] + (1 - wa) * parts[1] + 0.5).clip(0, 255).astype(np.uint8)
+
+
+@needs_avx2
+@pytest.mark.parametrize("step,half,width", [(2, True, 61), (2, False, 61), (3, False, 58), (2, True, 40)])
+def test_every_path_of_the_compiled_kernel_on_random_tables(step, half, width):
+    from lipsync import _flowkernel
+
+    rng = np.random.default_rng(step * 100 + width + half)
+    h, w = 37, width
+    img_a = rng.integers(0, 256, (h, w, 3), np.uint8)
+    img_b = rng.integers(0, 256, (h, w, 3), np.uint8)
+    y0, x0, bh, bw = 3, 5, 29, w - 10           # a box inside the image; the ROI is all of it
+    hc, wc = -(-bh // step), -(-bw // step)
+    keep = -(-wc // 2) if half else wc
+    # displacements up to +-12 px (1/64 px units), some pushing samples past the image edges
+    tabs = [rng.integers(-768, 768, (4, hc, keep, 2)).astype(np.int16) for _ in range(2)]
+    sides = [((0, 1, 2, 3), (0.1 / 64, 0.5 / 64, 0.5 / 64, -0.1 / 64)), ((-1, 0, 1, 2), (0.0, 0.3 / 64, 0.9 / 64, -0.2 / 64))]
+    wa = 0.35
+    want = _reference_from_tables(img_a, img_b, tabs, sides, (y0, x0, bh, bw), step, half, wc, wa).astype(int)
+    levels = range(0, _flowkernel.simd_available() + 1)
+    frames = []
+    for level in levels:
+        out = np.zeros((h, w, 3), np.uint8)
+        _flowkernel.warp_blend(pack_rgbx(img_a), pack_rgbx(img_b), tabs[0], tabs[1], out, out.strides[0],
+                               w, h, w + 1, hc, wc, keep, int(half), y0, x0, bh, bw, step, 0, h, 0, w,
+                               *sides[0], *sides[1], wa, level)
+        diff = np.abs(out.astype(int) - want)
+        assert diff.max() <= 1 and (diff > 0).mean() < 0.01, (level, diff.max(), (diff > 0).mean())
+        frames.append(out)
+    for f in frames[1:]:  # the vector paths do the scalar path's arithmetic
+        assert np.abs(f.astype(int) - frames[0]).max() <= 1
