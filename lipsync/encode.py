@@ -10,9 +10,11 @@ extension, see :func:`open_writer`).
 
 mp4 details
     The ffmpeg binary bundled with imageio-ffmpeg is driven as a subprocess reading raw
-    ``rgb24`` frames on stdin: H.264 (libx264), ``yuv420p`` tagged BT.709 (the matrix web
-    players assume for untagged RGB-sourced video), ``-movflags +faststart``, ``-crf`` and
-    ``-preset``. yuv420p needs even dimensions: an odd width or height is padded by one
+    ``yuv420p`` frames on stdin, converted from RGB in this process (:mod:`lipsync.yuv`,
+    BT.709 limited range): H.264 (libx264), tagged BT.709 matrix, primaries and transfer
+    and tv range (the matrix web players assume for untagged RGB-sourced video),
+    ``-movflags +faststart``, ``-crf`` and ``-preset`` (x264's presets, or a name from
+    :data:`X264_PRESETS`). yuv420p needs even dimensions: an odd width or height is padded by one
     pixel that repeats the last column/row (padding rather than cropping keeps every drawn
     pixel; repeating the edge avoids a dark seam bleeding into chroma).
 
@@ -77,6 +79,10 @@ from .registry import Registry
 __all__ = ["ENCODERS", "EncodeError", "Writer", "Mp4Writer", "PngWriter", "open_writer", "format_for", "probe"]
 
 ENCODERS: "Registry[type]" = Registry("output format")
+
+#: Named encoder settings beyond x264's own presets: name -> (x264 preset, -x264-params).
+#: Any other ``preset`` is passed to x264 as it is.
+X264_PRESETS: Dict[str, Tuple[str, Optional[str]]] = {}
 
 # How much of ffmpeg's stderr an EncodeError quotes: enough for the actual error line and
 # its context, short enough to read in a terminal.
@@ -368,6 +374,7 @@ class Mp4Writer(Writer):
         self.crf = int(crf)
         self.preset = str(preset)
         self._proc: Optional[subprocess.Popen] = None
+        self._yuv: Optional[np.ndarray] = None
         self._stderr = None
         self._temps: List[str] = []
         super().__init__(out, fps=fps, size=size, quiet=quiet, total=total)
@@ -404,7 +411,11 @@ class Mp4Writer(Writer):
         self._pad = (width % 2, height % 2)
         cmd = [
             _ffmpeg_exe(), "-y", "-hide_banner", "-nostats", "-loglevel", "error",
-            "-f", "rawvideo", "-pix_fmt", "rgb24", "-s", f"{width + self._pad[0]}x{height + self._pad[1]}",
+            # Frames arrive already converted (lipsync.yuv, on the writing thread): see
+            # _write_frame. Tagged on input too, so ffmpeg sees nothing to convert.
+            "-f", "rawvideo", "-pix_fmt", "yuv420p", "-color_range", "tv", "-colorspace", "bt709",
+            "-color_primaries", "bt709", "-color_trc", "bt709",
+            "-s", f"{width + self._pad[0]}x{height + self._pad[1]}",
             "-framerate", _fps_arg(self.fps), "-i", "pipe:0",
         ]
         if self.single_pass:
@@ -412,11 +423,14 @@ class Mp4Writer(Writer):
         else:
             cmd += ["-map", "0:v:0"]
         cmd += [
-            # sRGB frames -> limited-range BT.709, tagged so players convert back the same way.
-            "-vf", "scale=out_color_matrix=bt709:out_range=tv:flags=accurate_rnd+full_chroma_int,format=yuv420p",
+            # Tagged so players convert back to RGB the way the frames were converted.
             "-color_primaries", "bt709", "-color_trc", "bt709", "-colorspace", "bt709", "-color_range", "tv",
-            "-c:v", "libx264", "-crf", str(self.crf), "-preset", self.preset,
+            "-c:v", "libx264", "-crf", str(self.crf),
         ]
+        x264_preset, x264_params = X264_PRESETS.get(self.preset, (self.preset, None))
+        cmd += ["-preset", x264_preset]
+        if x264_params:
+            cmd += ["-x264-params", x264_params]
         if self.single_pass:
             # Pad short audio with silence, then cut both at the video's length.
             cmd += ["-af", "apad", "-c:a", "aac", "-b:a", AAC_BITRATE,
@@ -430,14 +444,20 @@ class Mp4Writer(Writer):
             if self.faststart:
                 cmd += ["-movflags", "+faststart"]
             cmd += ["-f", self.muxer, self.partial]
+        from .yuv import rgb_to_yuv420p
+
+        self._to_yuv = rgb_to_yuv420p
         self._stderr = tempfile.TemporaryFile()
         self._proc = _popen(cmd, stdin=subprocess.PIPE, stderr=self._stderr)
 
     def _write_frame(self, frame: np.ndarray) -> None:
         if any(self._pad):
             frame = np.pad(frame, ((0, self._pad[1]), (0, self._pad[0]), (0, 0)), mode="edge")
+        # Converted here rather than by swscale in ffmpeg: half the bytes through the pipe
+        # and a quarter of the CPU (1.1 ms vs 2.4 ms a 1280x720 frame; lipsync/yuv.py).
+        self._yuv = self._to_yuv(frame, self._yuv)
         try:
-            _write_all(self._proc.stdin, np.ascontiguousarray(frame).data)
+            _write_all(self._proc.stdin, self._yuv.data)
         except OSError as exc:
             # ffmpeg died (BrokenPipe) or the pipe failed: report ffmpeg's own words.
             raise self._failure("ffmpeg stopped reading frames", exc) from exc
