@@ -32,12 +32,30 @@ PathLike = Union[str, "os.PathLike[str]"]
 #: 25 fps is PAL video's rate and enough for lips (Rhubarb needs >= 24 for hard cuts;
 #: morphs look smooth well below that, so lower rates are allowed).
 DEFAULT_FPS = 25.0
-#: crf 18 is visually lossless for drawn faces. "veryfast": measured against ultrafast,
-#: superfast and faster on the same clip (bench figure "preset"), it was within noise of
-#: the fastest in wall and CPU time (rendering dominates, not encoding) and made files 2-5x
-#: smaller than ultrafast/superfast (0.46 MB vs 1.44 MB for 26.7 s at 512x512).
+#: crf 18 is visually lossless for drawn faces.
 DEFAULT_CRF = 18
-DEFAULT_PRESET = "veryfast"
+#: "talking-head" (lipsync.encode.X264_PRESETS: ultrafast's analysis plus CABAC, B-frames
+#: and the macroblock tree) replaced "veryfast" once frames reached ffmpeg as yuv420p and
+#: encoding became half of the CPU time. `lipsync render` of the 26.7 s benchmark clip,
+#: flows cached, 2 cores, best of 3 (wall s / CPU s / MB, with the 192 kb/s AAC track):
+#:
+#: ==============  ==================  ==================  ==================
+#: clip            veryfast            ultrafast           talking-head
+#: ==============  ==================  ==================  ==================
+#: face 512x512    2.48 / 4.00 / 0.46  2.22 / 3.41 / 1.45  2.17 / 3.39 / 0.52
+#: face 1280x720   6.50 / 11.4 / 0.94  5.53 / 9.47 / 5.77  5.10 / 8.81 / 0.81
+#: ==============  ==================  ==================  ==================
+#:
+#: With a renderer three times faster (emulated: every third frame rendered, the others
+#: copied) encoding dominates: 512x512 0.98 -> 0.73 s, 1280x720 3.39 -> 2.36 s to render
+#: and encode.
+DEFAULT_PRESET = "talking-head"
+#: x264 threads inside `lipsync render` on a machine of this many cores or fewer: one.
+#: The render threads already fill the cores, and x264's frame threads add lookahead and
+#: synchronisation work: 2 cores, talking-head, emulated 3x renderer: 1 thread 0.73 s /
+#: 2.36 s (512x512 / 1280x720) against 0.76 / 2.50 with x264's default (3 threads) and
+#: 0.78 / 2.56 with 2. Not measured on more cores, where x264 keeps its own default.
+SINGLE_ENCODER_THREAD_CORES = 2
 
 
 @dataclass(frozen=True)
@@ -152,7 +170,8 @@ def render_clip(timeline, output: PathLike, *, bank=None, audio: Optional[PathLi
     format : str, optional
         ``mp4`` or ``png`` (default: from ``output``).
     crf, preset
-        x264 quality and speed preset.
+        x264 quality, and speed preset (x264's, or one of
+        :data:`lipsync.encode.X264_PRESETS`).
     store : FlowStore or path-like, optional
         Flow store (default: the bank's own). Missing flows are computed first.
     jobs : int, optional
@@ -208,8 +227,10 @@ def render_clip(timeline, output: PathLike, *, bank=None, audio: Optional[PathLi
     # beier-neely keeps whole-frame scratch in the renderer: one thread; the rest are thread-safe
     threads = 1 if anim.renderer.method == "beier-neely" else None
     anim.renderer.frame_threads = 1  # whole frames run in parallel instead
+    encoder_threads = 1 if (os.cpu_count() or 1) <= SINGLE_ENCODER_THREAD_CORES else None
     with open_writer(output, fps=fps, size=(w, h), format=out_format, audio=audio,
-                     crf=crf, preset=preset, quiet=True, frames=n or None) as writer:
+                     crf=crf, preset=preset, quiet=True, frames=n or None,
+                     threads=encoder_threads) as writer:
         with tqdm(total=n, desc="render", unit="frame", disable=quiet, leave=False) as bar:
             def on_frame(done: int) -> None:
                 bar.update(1)

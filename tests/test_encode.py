@@ -547,3 +547,34 @@ def test_permission_denied_is_reported_even_when_running_as_root(tmp_path, monke
         assert "not writable" in str(err.value) and str(ro) in str(err.value)
     monkeypatch.undo()
     assert os.listdir(ro) == []
+
+
+def x264_options(path):
+    """The option string x264 writes into the stream (its SEI), as a dict."""
+    data = open(path, "rb").read()
+    start = data.index(b"options: ") + len(b"options: ")
+    text = data[start:data.index(b"\x00", start)].decode("ascii", "replace")
+    return dict(item.split("=", 1) for item in text.split() if "=" in item)
+
+
+def test_named_preset_and_threads_reach_x264(tmp_path):
+    from lipsync.clip import DEFAULT_PRESET
+
+    assert DEFAULT_PRESET in encode.X264_PRESETS
+    out = tmp_path / "th.mp4"
+    _, frames = colour_frames(8)
+    with open_writer(out, fps=FPS, size=(W, H), quiet=True, preset="talking-head", threads=1) as w:
+        for f in frames:
+            w.write(f)
+    opts = x264_options(out)
+    # ultrafast's analysis (subme 0, diamond search) with the tools added on top
+    assert (opts["cabac"], opts["bframes"], opts["b_adapt"], opts["mbtree"], opts["rc_lookahead"]) == \
+        ("1", "3", "0", "1", "5")
+    assert (opts["subme"], opts["me"], opts["8x8dct"], opts["threads"], opts["crf"]) == \
+        ("0", "dia", "1", "1", "18.0")
+    # Any other name goes to x264 unchanged.
+    with open_writer(out, fps=FPS, size=(W, H), quiet=True, preset="veryfast") as w:
+        for f in frames:
+            w.write(f)
+    opts = x264_options(out)
+    assert (opts["subme"], opts["me"], opts["b_adapt"], opts["rc_lookahead"]) == ("2", "hex", "1", "10")

@@ -161,3 +161,22 @@ def test_a_damaged_flow_entry_is_recomputed_during_render(rhubarb_bank, tmp_path
     assert first.frames == second.frames
     for a, b in zip(sorted((tmp_path / "a").glob("*.png")), sorted((tmp_path / "b").glob("*.png"))):
         assert a.read_bytes() == b.read_bytes()
+
+
+@pytest.mark.parametrize("cores, threads", [(2, "1"), (8, None)])
+def test_render_clip_encodes_on_one_x264_thread_on_two_cores(rhubarb_bank, tmp_path, monkeypatch, cores, threads):
+    # On <= 2 cores the render threads fill the machine; x264 gets one thread (lipsync.clip).
+    from lipsync import clip
+    from test_encode import x264_options
+
+    monkeypatch.setattr(clip.os, "cpu_count", lambda: cores)
+    tsv = tmp_path / "cues.tsv"
+    tsv.write_text("".join(f"{t:.2f}\t{v}\n" for t, v in CUES))
+    out = tmp_path / "a.mp4"
+    clip.render_clip(tsv, out, bank=rhubarb_bank, fps=FPS, quiet=True)
+    opts = x264_options(out)
+    assert opts["bframes"] == "3" and opts["mbtree"] == "1"  # the default preset, talking-head
+    if threads is None:
+        assert opts["threads"] != "1"
+    else:
+        assert opts["threads"] == threads

@@ -28,7 +28,8 @@ def add_parser(sub) -> None:
     p.add_argument("--format", choices=ENCODERS.names(), default=None,
                    help="output format (default: from OUT: a folder or no extension -> png, .mp4 -> mp4)")
     p.add_argument("--crf", type=int, default=DEFAULT_CRF, help=f"H.264 quality, lower is better (default: {DEFAULT_CRF})")
-    p.add_argument("--preset", default=DEFAULT_PRESET, help=f"x264 speed preset (default: {DEFAULT_PRESET})")
+    p.add_argument("--preset", default=DEFAULT_PRESET,
+                   help=f"x264 speed preset: x264's (ultrafast ... veryslow) or talking-head (default: {DEFAULT_PRESET})")
     add_store_option(p)
     add_jobs_option(p)
     add_quiet_option(p)
