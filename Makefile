@@ -6,10 +6,13 @@ STAMP   := $(VENV)/.installed
 
 .PHONY: test test-browser demo bench fuzz docs-images clean install
 
+# compileall: an editable install leaves no bytecode, and where PYTHONDONTWRITEBYTECODE is
+# set every run would compile the package again (~0.1 s of each lipsync start-up).
 $(STAMP): pyproject.toml setup.py
 	$(PY) -m venv $(VENV)
 	$(BIN)/pip install -q --upgrade pip
 	$(BIN)/pip install -q -e '.[test]'
+	$(BIN)/python -m compileall -q lipsync
 	touch $(STAMP)
 
 install: $(STAMP)
