@@ -396,3 +396,25 @@ def test_absurdly_long_timelines_are_refused_without_allocating(bank, tmp_path, 
     assert result.returncode == 2, result.stderr[-800:]
     assert str(timeline) in result.stderr and "frames" in result.stderr and "limit" in result.stderr
     assert sorted(os.listdir(tmp_path)) == [name]
+
+
+def test_render_imports_only_what_it_runs_on(tmp_path):
+    # `lipsync render` registers only its own command: the other commands' modules and
+    # what they run on (starlette, dask, the writers, recognisers) stay unloaded.
+    tsv = tmp_path / "cues.tsv"
+    tsv.write_text("0.00\tX\n0.20\tD\n0.60\tX\n")
+    code = ("import sys; from lipsync.cli import main; "
+            f"rc = main(['render', {str(tsv)!r}, '-o', {str(tmp_path / 'f')!r}, '--format', 'png', '--quiet']); "
+            "print(rc); print(' '.join(sorted(sys.modules)))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.split("\n")
+    assert out[0] == "0"
+    loaded = set(out[1].split())
+    assert "lipsync.cli.render" in loaded
+    for name in ("lipsync.cli.serve", "lipsync.cli.batch", "lipsync.cli.cues", "lipsync.server", "lipsync.batch",
+                 "lipsync.writers", "starlette", "dask", "pocketsphinx"):
+        assert name not in loaded, name
+    # --help and a mistyped command still see every command.
+    parser = cli.build_parser([])
+    names = set(parser._subparsers._group_actions[0].choices)
+    assert {"render", "serve", "batch", "cues", "align"} <= names
+    assert set(cli.build_parser(["rendr"])._subparsers._group_actions[0].choices) == names
