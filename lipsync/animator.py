@@ -145,6 +145,24 @@ class Animator:
             out = np.empty(self.renderer.shape + (3,), np.uint8)
         return self.renderer.render(spec.from_viseme, spec.to_viseme, spec.alpha, out=out)
 
+    def same_as_previous(self, index: int) -> bool:
+        """Whether frame ``index`` is identical to frame ``index - 1`` (a held shape).
+
+        Frames are a pure function of (from, to, alpha), and alpha 0 or 1 (or from = to)
+        is simply that viseme's image, so equal specs mean equal frames.
+
+        Examples
+        --------
+        >>> from lipsync._data import default_bank_dir
+        >>> from lipsync.timeline import Segment, Timeline
+        >>> a = Animator(default_bank_dir(), Timeline((Segment(0.0, 0.4, "sil"),), kind="phoneme"), fps=25)
+        >>> a.same_as_previous(0), a.same_as_previous(5)
+        (False, True)
+        """
+        if not 0 < index < len(self.specs):
+            return False
+        return _still_key(self.specs[index]) == _still_key(self.specs[index - 1])
+
     def frame_at(self, t: float) -> np.ndarray:
         """The frame shown at time ``t`` seconds (the frame whose interval holds ``t``)."""
         if not math.isfinite(t):
@@ -161,3 +179,12 @@ class Animator:
         for spec in self.specs:
             frame = self.renderer.render(spec.from_viseme, spec.to_viseme, spec.alpha)
             yield frame.copy() if copy else frame
+
+
+def _still_key(spec) -> tuple:
+    """What a frame shows: one viseme's image, or (from, to, alpha) strictly in between."""
+    if spec.from_viseme == spec.to_viseme or spec.alpha <= 0.0:
+        return (spec.from_viseme,)
+    if spec.alpha >= 1.0:
+        return (spec.to_viseme,)
+    return (spec.from_viseme, spec.to_viseme, spec.alpha)

@@ -106,16 +106,23 @@ class ClipReport:
 QUEUE_FRAMES = 8
 
 
-def render_parallel(render_into, n: int, shape, write, *, threads: Optional[int] = None, progress=None) -> None:
+def render_parallel(render_into, n: int, shape, write, *, threads: Optional[int] = None, progress=None,
+                    prepare=None, same_as_previous=None) -> None:
     """Render frames ``0..n-1`` on worker threads and ``write`` them in order from this one.
-
-    ``progress(done)``, if given, is called after each frame is written.
 
     ``render_into(i, buf)`` fills ``buf`` (a ``shape`` uint8 array) with frame i; it must be
     safe to call from several threads (the renderer's kernels release the GIL, so threads
     render in parallel). At most :data:`QUEUE_FRAMES` frames are in flight, each in its own
     buffer, so memory stays flat; writing (a pipe to ffmpeg, which encodes on its own
     threads) overlaps rendering. An error on either side stops both and is raised here.
+
+    ``prepare(buf, previous)``, if given, runs on the worker right after the frame is
+    rendered and turns it into what ``write`` receives (a writer's
+    :meth:`~lipsync.encode.Writer.prepare`: colour conversion, compression), so that work
+    is parallel too; ``previous`` is that slot's last result, to reuse as its buffer.
+    ``same_as_previous(i)``, if given, tells that frame i equals frame i - 1: it is not
+    rendered again, the previous result is written again (a held mouth shape costs only
+    the write). ``progress(done)``, if given, is called after each frame is written.
     """
     from concurrent.futures import ThreadPoolExecutor
 
@@ -123,25 +130,34 @@ def render_parallel(render_into, n: int, shape, write, *, threads: Optional[int]
 
     threads = max(1, int(threads or os.cpu_count() or 1))
     depth = max(QUEUE_FRAMES, 2 * threads)
-    free = [np.empty(shape, np.uint8) for _ in range(min(depth, n))]
+    # frames that need rendering: the first, and every one that differs from its predecessor
+    fresh = [i for i in range(n) if i == 0 or same_as_previous is None or not same_as_previous(i)]
+    free = [[np.empty(shape, np.uint8), None] for _ in range(min(depth + 1, len(fresh)))]
     pending = {}
 
-    def job(i, buf):
-        render_into(i, buf)
-        return buf
+    def job(i, slot):
+        render_into(i, slot[0])
+        if prepare is not None:
+            slot[1] = prepare(slot[0], slot[1])
+        return slot
 
     with ThreadPoolExecutor(max_workers=threads, thread_name_prefix="lipsync-render") as ex:
         try:
-            nxt = 0
+            nxt = 0          # next entry of `fresh` to submit
+            current = None   # the slot of the last frame written: kept while it repeats
             for i in range(n):
-                while nxt < n and free:
-                    pending[nxt] = ex.submit(job, nxt, free.pop())
+                # `current` is out of `free` while it may repeat; with two or more slots a frame
+                # still to render always finds one (everything before it has been written)
+                while nxt < len(fresh) and free:
+                    pending[fresh[nxt]] = ex.submit(job, fresh[nxt], free.pop())
                     nxt += 1
-                buf = pending.pop(i).result()
-                write(buf)
+                if i in pending:
+                    if current is not None:
+                        free.append(current)
+                    current = pending.pop(i).result()
+                write(current[0] if prepare is None else current[1])
                 if progress is not None:
                     progress(i + 1)
-                free.append(buf)
         finally:
             for fut in pending.values():
                 fut.cancel()
@@ -237,8 +253,9 @@ def render_clip(timeline, output: PathLike, *, bank=None, audio: Optional[PathLi
                 if progress is not None:
                     progress(done, n)
 
-            render_parallel(lambda i, buf: anim.frame(i, out=buf), n, (h, w, 3), writer.write,
-                            threads=threads, progress=on_frame)
+            render_parallel(lambda i, buf: anim.frame(i, out=buf), n, (h, w, 3), writer.write_prepared,
+                            threads=threads, progress=on_frame, prepare=writer.prepare,
+                            same_as_previous=anim.same_as_previous)
     t2 = time.perf_counter()
     return ClipReport(output=str(output), frames=len(anim), fps=float(fps), size=(w, h), method=method,
                       seconds_setup=t1 - t0, seconds_render=t2 - t1)

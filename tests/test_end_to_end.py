@@ -142,6 +142,40 @@ def test_render_parallel_keeps_order_and_stops_on_errors():
     assert written == list(range(7))
 
 
+def test_render_parallel_renders_a_held_frame_once_and_prepares_on_the_workers():
+    import random
+    import threading
+    import time
+
+    from lipsync.clip import render_parallel
+
+    # frames 0..59 show value i // 4 (each held for 4 frames), except a run of 9 equal ones
+    values = [i // 4 for i in range(60)]
+    values[20:29] = [99] * 9
+    rendered, prepared_on = [], set()
+
+    def render_into(i, buf):
+        time.sleep(random.random() * 0.003)
+        rendered.append(i)
+        buf[:] = values[i]
+
+    def prepare(buf, previous):
+        prepared_on.add(threading.current_thread().name)
+        out = previous if previous is not None else np.empty(1, np.int64)
+        out[0] = int(buf[0, 0, 0]) + 1000   # the writer gets the prepared value, not the frame
+        return out
+
+    for threads in (1, 3):
+        rendered.clear()
+        got = []
+        render_parallel(render_into, 60, (2, 2, 3), lambda p: got.append(int(p[0])), threads=threads,
+                        prepare=prepare, same_as_previous=lambda i: values[i] == values[i - 1])
+        assert got == [v + 1000 for v in values]
+        fresh = [i for i in range(60) if i == 0 or values[i] != values[i - 1]]
+        assert sorted(rendered) == fresh          # each distinct frame rendered once
+    assert all(name.startswith("lipsync-render") for name in prepared_on)
+
+
 def test_a_damaged_flow_entry_is_recomputed_during_render(rhubarb_bank, tmp_path):
     import shutil
 
