@@ -509,6 +509,80 @@ done:
     return result;
 }
 
+/* ---------------------------------------------------------------- RGB -> yuv420p */
+
+/* BT.709 limited range in fixed point, the arithmetic of lipsync/yuv.py (which passes the
+ * constants, so there is one source for them): luma per pixel, chroma from the sums of
+ * each 2x2 block. Built twice like the rows above; GCC vectorises the AVX2 copy. */
+typedef struct {
+    const uint8_t *rgb;
+    uint8_t *out;
+    int w, h;
+    int32_t c[9], yhalf, chalf, shift;
+} yuv_t;
+
+static inline __attribute__((always_inline)) void yuv_body(const yuv_t *a)
+{
+    const int32_t yr = a->c[0], yg = a->c[1], yb = a->c[2], ur = a->c[3], ug = a->c[4], ub = a->c[5];
+    const int32_t vr = a->c[6], vg = a->c[7], vb = a->c[8];
+    const int w = a->w, h = a->h, cw = w / 2, s1 = a->shift, s2 = a->shift + 2;
+    uint8_t *u = a->out + (size_t)w * h, *v = u + (size_t)cw * (h / 2);
+    for (int r = 0; r < h; r++) {
+        const uint8_t *row = a->rgb + (size_t)r * w * 3;
+        uint8_t *y = a->out + (size_t)r * w;
+        for (int x = 0; x < w; x++)
+            y[x] = (uint8_t)((yr * row[3 * x] + yg * row[3 * x + 1] + yb * row[3 * x + 2] + a->yhalf) >> s1);
+    }
+    for (int j = 0; j < h / 2; j++) {
+        const uint8_t *p = a->rgb + (size_t)(2 * j) * w * 3, *q = p + (size_t)w * 3;
+        for (int i = 0; i < cw; i++) {
+            int k = 6 * i;
+            int32_t rs = p[k] + p[k + 3] + q[k] + q[k + 3];
+            int32_t gs = p[k + 1] + p[k + 4] + q[k + 1] + q[k + 4];
+            int32_t bs = p[k + 2] + p[k + 5] + q[k + 2] + q[k + 5];
+            u[(size_t)j * cw + i] = (uint8_t)((ur * rs + ug * gs + ub * bs + a->chalf) >> s2);
+            v[(size_t)j * cw + i] = (uint8_t)((vr * rs + vg * gs + vb * bs + a->chalf) >> s2);
+        }
+    }
+}
+
+#if LS_X86
+LS_AVX2_TARGET static void yuv_avx2(const yuv_t *a) { yuv_body(a); }
+#endif
+static void yuv_plain(const yuv_t *a) { yuv_body(a); }
+
+static PyObject *rgb_to_yuv420p(PyObject *self, PyObject *args)
+{
+    Py_buffer rgb, out;
+    yuv_t a;
+    if (!PyArg_ParseTuple(args, "y*w*ii(iiiiiiiii)iii", &rgb, &out, &a.w, &a.h, &a.c[0], &a.c[1], &a.c[2],
+                          &a.c[3], &a.c[4], &a.c[5], &a.c[6], &a.c[7], &a.c[8], &a.yhalf, &a.chalf, &a.shift))
+        return NULL;
+    PyObject *result = NULL;
+    if (a.w < 2 || a.h < 2 || a.w % 2 || a.h % 2 || a.shift < 1 || a.shift > 24) {
+        PyErr_SetString(PyExc_ValueError, "rgb_to_yuv420p: even width and height needed");
+        goto done;
+    }
+    if (check_buffer(&rgb, (Py_ssize_t)a.w * a.h * 3, "rgb")
+        || check_buffer(&out, (Py_ssize_t)a.w * a.h + 2 * (Py_ssize_t)(a.w / 2) * (a.h / 2), "out"))
+        goto done;
+    a.rgb = rgb.buf;
+    a.out = out.buf;
+    Py_BEGIN_ALLOW_THREADS
+#if LS_X86
+    if (simd_level() >= 1) yuv_avx2(&a);
+    else
+#endif
+        yuv_plain(&a);
+    Py_END_ALLOW_THREADS
+    result = Py_None;
+    Py_INCREF(result);
+done:
+    PyBuffer_Release(&rgb);
+    PyBuffer_Release(&out);
+    return result;
+}
+
 static PyObject *simd_available(PyObject *self, PyObject *noargs)
 {
     return PyLong_FromLong(simd_level());
@@ -519,11 +593,13 @@ static PyMethodDef methods[] = {
      "warp_blend(pa, pb, ta, tb, out, out_stride, w, h, wp, hc, wc, keep, half, by0, bx0, bh, bw, step,\n"
      "           ry0, ry1, rx0, rx1, idx_a, wts_a, idx_b, wts_b, wa, simd=2)\n"
      "Render rows [ry0, ry1) x columns [rx0, rx1) of a flow frame into out (see lipsync.render)."},
+    {"rgb_to_yuv420p", rgb_to_yuv420p, METH_VARARGS,
+     "rgb_to_yuv420p(rgb, out, w, h, coefficients, yhalf, chalf, shift): see lipsync.yuv."},
     {"simd_available", simd_available, METH_NOARGS,
      "The widest path this CPU runs: 2 AVX-512, 1 AVX2, 0 neither (warp_blend's simd caps it)."},
     {NULL, NULL, 0, NULL}};
 
 static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_flowkernel",
-                                    "The flow renderer's compiled frame kernel (see lipsync.render).", -1, methods};
+                                    "The flow renderer's compiled frame kernel (see lipsync.render) and yuv420p conversion (lipsync.yuv).", -1, methods};
 
 PyMODINIT_FUNC PyInit__flowkernel(void) { return PyModule_Create(&module); }

@@ -113,42 +113,14 @@ for _name, _why in [("flow", "interpolate the cached flows (fast, default)"),
 
 # --------------------------------------------------------------------------- kernels
 #
-# One fused pass per frame (numba, compiled once and cached on disk): for every output pixel,
-# the two inverse displacements are read bilinearly off the coarse tables, both images are
-# sampled bilinearly (edge pixels repeated) and blended. No full-resolution map is ever
-# materialised: cv2.remap would need one per side (resize + convertMaps + remap: three
-# passes over 8-byte-per-pixel maps) and a fourth for the blend. On one core a whole-frame
-# flow frame costs about half the CPU of round one's per-frame Newton + cv2.remap path
-# (toon 512x512 2.2x less, drawn face 1.9x, measured side by side). nogil: frames, or row
-# bands of one frame, render in parallel threads.
-
-import numba as _nb
-
-
-@_nb.njit(cache=True, nogil=True)
-def _combine_kernel(tab, idx, wts, half, wc, scale, out):  # pragma: no cover - compiled
-    """out (hc, wc, 2) float32 = sum_n wts[n] * tab[idx[n]] / scale (idx < 0: the zero table)."""
-    hc = tab.shape[1]
-    keep = tab.shape[2]
-    inv = np.float32(1.0 / scale)
-    for i in range(hc):
-        for j in range(keep):
-            dx = np.float32(0.0)
-            dy = np.float32(0.0)
-            for n in range(4):
-                k = idx[n]
-                if k >= 0:
-                    dx += wts[n] * np.float32(tab[k, i, j, 0])
-                    dy += wts[n] * np.float32(tab[k, i, j, 1])
-            dx *= inv
-            dy *= inv
-            if half:
-                jj = wc - 1 - j
-                out[i, jj, 0] = -dx
-                out[i, jj, 1] = dy
-            out[i, j, 0] = dx
-            out[i, j, 1] = dy
-
+# One fused pass per frame: for every output pixel, the two inverse displacements are read
+# bilinearly off the coarse tables, both images are sampled bilinearly (edge pixels
+# repeated) and blended. No full-resolution map is ever materialised: cv2.remap would need
+# one per side (resize + convertMaps + remap: three passes over 8-byte-per-pixel maps) and
+# a fourth for the blend. The compiled kernel is lipsync/_flowkernel.c; the portable one,
+# numba's, is in lipsync/_numba_kernels.py (imported only when used: numba's import and
+# cache load are ~0.3 s of a `lipsync render`). Both release the GIL: frames, or row bands
+# of one frame, render in parallel threads.
 
 #: Packed pixels: R | G << 21 | B << 42 in one int64, so a bilinear tap is one load and one
 #: multiply for all three channels. 21-bit lanes hold 255 * 4096 (a full set of 12-bit
@@ -195,87 +167,6 @@ def pack_rgbx(image: np.ndarray) -> np.ndarray:
     packed = cv2.cvtColor(padded, cv2.COLOR_RGB2RGBA).view(np.uint32)[..., 0]
     np.bitwise_and(packed, np.uint32(0xFFFFFF), out=packed)  # X = 0 (the kernel does not mask it)
     return packed
-
-
-@_nb.njit(cache=True, nogil=True, fastmath=True, boundscheck=False)
-def _warp_blend_kernel(pa, pb, da, db, by0, bx0, bh, bw, step, ry0, ry1, rx0, rx1, ka, out,
-                       rowbuf, rowfull):  # pragma: no cover - compiled
-    """Frame pixels [ry0, ry1) x [rx0, rx1): (1-alpha) A(Y + da(Y)) + alpha B(Y + db(Y)).
-
-    pa, pb: packed images (:func:`pack_pixels`); da, db: coarse displacements over the box
-    (by0, bx0, bh, bw) with spacing ``step``, zero outside it; ka = (1 - alpha) in
-    1/4096. Per output row the coarse rows are interpolated once into ``rowfull`` (4
-    floats per pixel), so the pixel loop is only two fixed-point bilinear samples of packed
-    pixels and the blend. Edge pixels are repeated (positions are clamped to the image).
-    """
-    H = pa.shape[0]
-    W = pa.shape[1]
-    hc = da.shape[0]
-    wc = da.shape[1]
-    kb = 4096 - ka
-    xmax = (W - 1) * 64
-    ymax = (H - 1) * 64
-    inv = np.float32(1.0 / step)
-    m = np.int64(2097151)
-    rw = rx1 - rx0
-    rowfull[:rw, :] = 0.0
-    for y in range(ry0, ry1):
-        yl = y - by0
-        if hc > 0 and yl >= 0 and yl < bh:
-            cy = (np.float32(yl) + np.float32(0.5)) * inv - np.float32(0.5)
-            cy = min(max(cy, np.float32(0.0)), np.float32(hc - 1))
-            i0 = int(cy)
-            fy = cy - np.float32(i0)
-            i1 = np.uint64(min(i0 + 1, hc - 1))
-            i0 = np.uint64(i0)
-            for j in range(wc):
-                for c in range(2):
-                    rowbuf[j, c] = da[i0, j, c] + fy * (da[i1, j, c] - da[i0, j, c])
-                    rowbuf[j, 2 + c] = db[i0, j, c] + fy * (db[i1, j, c] - db[i0, j, c])
-            for xl in range(bw):
-                cx = (np.float32(xl) + np.float32(0.5)) * inv - np.float32(0.5)
-                cx = min(max(cx, np.float32(0.0)), np.float32(wc - 1))
-                j0 = int(cx)
-                fx = cx - np.float32(j0)
-                j1 = np.uint64(min(j0 + 1, wc - 1))
-                j0 = np.uint64(j0)
-                o = np.uint64(xl + bx0 - rx0)
-                for c in range(4):
-                    rowfull[o, c] = rowbuf[j0, c] + fx * (rowbuf[j1, c] - rowbuf[j0, c])
-        else:
-            rowfull[:rw, :] = 0.0
-        fyy = np.float32(y)
-        for o in range(rw):
-            x = rx0 + o
-            fxx = np.float32(x)
-            sx = min(max(int((fxx + rowfull[o, 0]) * np.float32(64.0) + np.float32(0.5)), 0), xmax)
-            sy = min(max(int((fyy + rowfull[o, 1]) * np.float32(64.0) + np.float32(0.5)), 0), ymax)
-            x0 = sx >> 6
-            y0 = sy >> 6
-            ux = sx & 63
-            uy = sy & 63
-            x1 = np.uint64(min(x0 + 1, W - 1))  # unsigned indices: numba then skips its
-            y1 = np.uint64(min(y0 + 1, H - 1))  # negative-index wraparound (~15% of the loop)
-            x0 = np.uint64(x0)
-            y0 = np.uint64(y0)
-            acc_a = (pa[y0, x0] * ((64 - ux) * (64 - uy)) + pa[y0, x1] * (ux * (64 - uy))
-                     + pa[y1, x0] * ((64 - ux) * uy) + pa[y1, x1] * (ux * uy))
-            sx = min(max(int((fxx + rowfull[o, 2]) * np.float32(64.0) + np.float32(0.5)), 0), xmax)
-            sy = min(max(int((fyy + rowfull[o, 3]) * np.float32(64.0) + np.float32(0.5)), 0), ymax)
-            x0 = sx >> 6
-            y0 = sy >> 6
-            ux = sx & 63
-            uy = sy & 63
-            x1 = np.uint64(min(x0 + 1, W - 1))  # unsigned indices: numba then skips its
-            y1 = np.uint64(min(y0 + 1, H - 1))  # negative-index wraparound (~15% of the loop)
-            x0 = np.uint64(x0)
-            y0 = np.uint64(y0)
-            acc_b = (pb[y0, x0] * ((64 - ux) * (64 - uy)) + pb[y0, x1] * (ux * (64 - uy))
-                     + pb[y1, x0] * ((64 - ux) * uy) + pb[y1, x1] * (ux * uy))
-            # blend in 1/4096 and round: (wa * acc_a + wb * acc_b) / 4096^2 per lane
-            out[y, x, 0] = ((acc_a & m) * ka + (acc_b & m) * kb + 8388608) >> 24
-            out[y, x, 1] = (((acc_a >> 21) & m) * ka + ((acc_b >> 21) & m) * kb + 8388608) >> 24
-            out[y, x, 2] = (((acc_a >> 42) & m) * ka + ((acc_b >> 42) & m) * kb + 8388608) >> 24
 
 
 def table_weights(t: float, steps: int) -> Tuple[np.ndarray, np.ndarray]:
@@ -615,7 +506,7 @@ class Renderer:
             # each thread its own row buffers; the coarse planes are shared, read-only
             _, _, rb, rf = self._scratch(hc, ia.coarse_width)
             for ka, dst in jobs:
-                _warp_blend_kernel(pa, pb, da, db, *box, y0, y1, r.x0, r.x1, ka, dst, rb, rf)
+                _numba_kernels().warp_blend(pa, pb, da, db, *box, y0, y1, r.x0, r.x1, ka, dst, rb, rf)
         return band
 
     def _band_pool(self):
@@ -670,7 +561,13 @@ def _table_args(inv: InverseTables, t: float) -> Tuple[Tuple[int, ...], Tuple[fl
 
 def _fill_coarse(inv: InverseTables, t: float, out: np.ndarray) -> None:
     idx, wts = table_weights(t, inv.steps)
-    _combine_kernel(inv.data, idx, wts, inv.half, inv.coarse_width, float(inv.scale), out)
+    _numba_kernels().combine_tables(inv.data, idx, wts, inv.half, inv.coarse_width, float(inv.scale), out)
+
+
+def _numba_kernels():
+    from . import _numba_kernels as nk  # numba loads only for the portable kernel
+
+    return nk
 
 
 def _canonical(method: str) -> str:

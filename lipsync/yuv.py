@@ -4,8 +4,8 @@ r"""RGB frames to planar YUV 4:2:0 (BT.709, limited range), the pixel format H.2
 ffmpeg instead of ``rgb24``: half the bytes through the pipe, and no swscale pass inside
 ffmpeg. swscale's exact path for this conversion (``accurate_rnd+full_chroma_int``, the
 only one that rounds correctly) cost 2.4 CPU-ms per 1280x720 frame (1.6 CPU-s of a 26.7 s
-clip); this fused pass takes 1.2 ms on one core (0.32 ms at 512x512) and runs on the
-caller's thread, outside the GIL. On the benchmark clips 99 % of its output bytes equal
+clip); this fused pass runs in the compiled extension (lipsync._flowkernel; numba's copy
+of it when that is not built) on the caller's thread, outside the GIL. On the benchmark clips 99 % of its output bytes equal
 swscale's; the rest differ by 1-5 levels in chroma at sharp colour edges, where swscale
 filters over more than the 2x2 block.
 
@@ -29,7 +29,6 @@ from __future__ import annotations
 
 from typing import Optional
 
-import numba as _nb
 import numpy as np
 
 _KR, _KB = 0.2126, 0.0722
@@ -49,42 +48,11 @@ _VB = round(-224 / 255 * _KB / (2 * (1 - _KR)) * _ONE)
 _VG = -_VR - _VB
 
 
-# int32 constants keep the arithmetic in 32 bits (numba would widen to int64 around
-# Python ints); with luma in its own row loop this measured 1.1 ms per 1280x720 frame
-# against 1.5 ms for one int64 loop over 2x2 blocks.
-_I = np.int32
-_C = tuple(_I(v) for v in (_YR, _YG, _YB, _UR, _UG, _UB, _VR, _VG, _VB))
-_YHALF = _I((16 << _SHIFT) + (1 << (_SHIFT - 1)))
-# Chroma works on sums of four pixels: two more bits of scale, and offset and rounding to match.
-_CHALF = _I((128 << (_SHIFT + 2)) + (1 << (_SHIFT + 1)))
-_S1, _S2 = _I(_SHIFT), _I(_SHIFT + 2)
-
-
-@_nb.njit(cache=True, nogil=True, boundscheck=False)
-def _convert(rgb, out):  # pragma: no cover - compiled
-    # Flat rows (3 bytes a pixel): twice as fast as indexing [x, channel] (2.35 ms -> 1.1).
-    yr, yg, yb, ur, ug, ub, vr, vg, vb = _C
-    h, w = rgb.shape[0], rgb.shape[1]
-    flat = rgb.reshape(h, w * 3)
-    cw = w // 2
-    u0 = h * w
-    v0 = u0 + (h // 2) * cw
-    for r in range(h):
-        row = flat[r]
-        o = r * w
-        for x in range(w):
-            k = 3 * x
-            out[o + x] = np.uint8((yr * _I(row[k]) + yg * _I(row[k + 1]) + yb * _I(row[k + 2]) + _YHALF) >> _S1)
-    for j in range(h // 2):
-        a = flat[2 * j]
-        b = flat[2 * j + 1]
-        for i in range(cw):
-            k = 6 * i
-            rs = _I(a[k]) + _I(a[k + 3]) + _I(b[k]) + _I(b[k + 3])
-            gs = _I(a[k + 1]) + _I(a[k + 4]) + _I(b[k + 1]) + _I(b[k + 4])
-            bs = _I(a[k + 2]) + _I(a[k + 5]) + _I(b[k + 2]) + _I(b[k + 5])
-            out[u0 + j * cw + i] = np.uint8((ur * rs + ug * gs + ub * bs + _CHALF) >> _S2)
-            out[v0 + j * cw + i] = np.uint8((vr * rs + vg * gs + vb * bs + _CHALF) >> _S2)
+# Luma rounds from 16 + one half; chroma works on sums of four pixels: two more bits of
+# scale, and offset and rounding to match.
+_COEFFICIENTS = (_YR, _YG, _YB, _UR, _UG, _UB, _VR, _VG, _VB)
+_YHALF = (16 << _SHIFT) + (1 << (_SHIFT - 1))
+_CHALF = (128 << (_SHIFT + 2)) + (1 << (_SHIFT + 1))
 
 
 def yuv420p_size(width: int, height: int) -> int:
@@ -130,5 +98,13 @@ def rgb_to_yuv420p(rgb: np.ndarray, out: Optional[np.ndarray] = None) -> np.ndar
         out = np.empty(n, np.uint8)
     elif out.dtype != np.uint8 or out.shape != (n,):
         raise ValueError(f"out must be uint8 of shape ({n},), got {out.dtype} {out.shape}")
-    _convert(np.ascontiguousarray(rgb), out)
+    rgb = np.ascontiguousarray(rgb)
+    try:
+        from . import _flowkernel
+    except ImportError:  # pragma: no cover - depends on the install
+        from ._numba_kernels import rgb_to_yuv420p as convert
+
+        convert(rgb, out)
+    else:
+        _flowkernel.rgb_to_yuv420p(rgb, out, w, h, _COEFFICIENTS, _YHALF, _CHALF, _SHIFT)
     return out

@@ -125,3 +125,15 @@ def test_docstring_examples_run():
 
     result = doctest.testmod(yuv)
     assert result.attempted >= 2 and result.failed == 0
+
+
+def test_compiled_and_numba_conversions_give_the_same_bytes():
+    pytest.importorskip("lipsync._flowkernel")
+    from lipsync._numba_kernels import rgb_to_yuv420p as numba_convert
+
+    rng = np.random.default_rng(7)
+    for h, w in ((2, 2), (38, 62), (144, 256)):
+        rgb = rng.integers(0, 256, (h, w, 3), np.uint8)
+        want = np.empty(yuv420p_size(w, h), np.uint8)
+        numba_convert(rgb, want)
+        np.testing.assert_array_equal(rgb_to_yuv420p(rgb), want)
