@@ -101,11 +101,13 @@ class ClipReport:
                 f"({rt:.1f}x real time), total {self.seconds_setup + self.seconds_render:.2f} s")
 
 
-# Overlap with ffmpeg, measured on 2 cores with an emulated 3x faster frame kernel (both
-# cores busy, so total CPU decides): converting to yuv420p in the render threads instead
-# of in writer.write, a 1 MB pipe buffer instead of Linux's 64 KB, and 1, 2 or 3 render
-# threads all stayed within run-to-run noise (+-0.05 s at 512x512, +-0.1 s at 1280x720),
-# as did dropping +faststart (the moov rewrite of a <1 MB file); kept simple.
+# Overlap with ffmpeg, on 2 cores (both busy, so total CPU decides). With an emulated 3x
+# faster frame kernel, a 1 MB pipe buffer instead of Linux's 64 KB, 1, 2 or 3 render
+# threads and dropping +faststart (the moov rewrite of a <1 MB file) all stayed within
+# run-to-run noise (+-0.05 s at 512x512, +-0.1 s at 1280x720). With the real compiled
+# kernel, writing a held frame again instead of rendering it (half the frames of speech)
+# and converting to yuv420p on the render threads took render + encode of the 26.7 s
+# drawn-face clip from 2.55-2.61 to 2.31 s at 1280x720 (0.79 to 0.75 s at 512x512).
 #: Frames rendered ahead of the encoder. A few are enough to keep both busy; each is one
 #: frame of memory (0.8 MB at 512x512), so memory stays flat however long the clip.
 QUEUE_FRAMES = 8

@@ -469,7 +469,7 @@ def bench_presets(rows: List[dict], banks: Dict[str, Path], timeline: Path, audi
 
     for label, path in banks.items():
         _preprocessed(path)
-        for preset in ("ultrafast", "superfast", "veryfast", "faster"):
+        for preset in ("talking-head", "ultrafast", "superfast", "veryfast"):
             with tempfile.TemporaryDirectory() as tmp:
                 out = Path(tmp) / "out.mp4"
                 walls, cpus = [], []
