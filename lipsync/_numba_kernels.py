@@ -37,6 +37,25 @@ def combine_tables(tab, idx, wts, half, wc, scale, out):  # pragma: no cover - c
             out[i, j, 1] = dy
 
 
+@_nb.njit(inline="always", fastmath=True, boundscheck=False)
+def _tap(p, px, py, xmax, ymax):  # pragma: no cover - compiled
+    """Bilinear sample of packed image ``p`` at (px, py): the three 21-bit lanes, in 1/4096."""
+    H = p.shape[0]
+    W = p.shape[1]
+    sx = min(max(int(px * np.float32(64.0) + np.float32(0.5)), 0), xmax)
+    sy = min(max(int(py * np.float32(64.0) + np.float32(0.5)), 0), ymax)
+    x0 = sx >> 6
+    y0 = sy >> 6
+    ux = sx & 63
+    uy = sy & 63
+    x1 = np.uint64(min(x0 + 1, W - 1))  # unsigned indices: numba then skips its
+    y1 = np.uint64(min(y0 + 1, H - 1))  # negative-index wraparound (~15% of the loop)
+    x0 = np.uint64(x0)
+    y0 = np.uint64(y0)
+    return (p[y0, x0] * ((64 - ux) * (64 - uy)) + p[y0, x1] * (ux * (64 - uy))
+            + p[y1, x0] * ((64 - ux) * uy) + p[y1, x1] * (ux * uy))
+
+
 @_nb.njit(cache=True, nogil=True, fastmath=True, boundscheck=False)
 def warp_blend(pa, pb, da, db, by0, bx0, bh, bw, step, ry0, ry1, rx0, rx1, ka, out,
                        rowbuf, rowfull):  # pragma: no cover - compiled
@@ -88,30 +107,8 @@ def warp_blend(pa, pb, da, db, by0, bx0, bh, bw, step, ry0, ry1, rx0, rx1, ka, o
         for o in range(rw):
             x = rx0 + o
             fxx = np.float32(x)
-            sx = min(max(int((fxx + rowfull[o, 0]) * np.float32(64.0) + np.float32(0.5)), 0), xmax)
-            sy = min(max(int((fyy + rowfull[o, 1]) * np.float32(64.0) + np.float32(0.5)), 0), ymax)
-            x0 = sx >> 6
-            y0 = sy >> 6
-            ux = sx & 63
-            uy = sy & 63
-            x1 = np.uint64(min(x0 + 1, W - 1))  # unsigned indices: numba then skips its
-            y1 = np.uint64(min(y0 + 1, H - 1))  # negative-index wraparound (~15% of the loop)
-            x0 = np.uint64(x0)
-            y0 = np.uint64(y0)
-            acc_a = (pa[y0, x0] * ((64 - ux) * (64 - uy)) + pa[y0, x1] * (ux * (64 - uy))
-                     + pa[y1, x0] * ((64 - ux) * uy) + pa[y1, x1] * (ux * uy))
-            sx = min(max(int((fxx + rowfull[o, 2]) * np.float32(64.0) + np.float32(0.5)), 0), xmax)
-            sy = min(max(int((fyy + rowfull[o, 3]) * np.float32(64.0) + np.float32(0.5)), 0), ymax)
-            x0 = sx >> 6
-            y0 = sy >> 6
-            ux = sx & 63
-            uy = sy & 63
-            x1 = np.uint64(min(x0 + 1, W - 1))  # unsigned indices: numba then skips its
-            y1 = np.uint64(min(y0 + 1, H - 1))  # negative-index wraparound (~15% of the loop)
-            x0 = np.uint64(x0)
-            y0 = np.uint64(y0)
-            acc_b = (pb[y0, x0] * ((64 - ux) * (64 - uy)) + pb[y0, x1] * (ux * (64 - uy))
-                     + pb[y1, x0] * ((64 - ux) * uy) + pb[y1, x1] * (ux * uy))
+            acc_a = _tap(pa, fxx + rowfull[o, 0], fyy + rowfull[o, 1], xmax, ymax)
+            acc_b = _tap(pb, fxx + rowfull[o, 2], fyy + rowfull[o, 3], xmax, ymax)
             # blend in 1/4096 and round: (wa * acc_a + wb * acc_b) / 4096^2 per lane
             out[y, x, 0] = ((acc_a & m) * ka + (acc_b & m) * kb + 8388608) >> 24
             out[y, x, 1] = (((acc_a >> 21) & m) * ka + ((acc_b >> 21) & m) * kb + 8388608) >> 24
