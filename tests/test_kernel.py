@@ -257,3 +257,39 @@ def test_every_path_of_the_compiled_kernel_on_random_tables(step, half, width):
         frames.append(out)
     for f in frames[1:]:  # the vector paths do the scalar path's arithmetic
         assert np.abs(f.astype(int) - frames[0]).max() <= 1
+
+
+def test_without_the_compiled_extension_everything_falls_back_to_numba(banks):
+    """An install whose C build failed (no compiler): the same frames within 2 levels and
+    the same yuv bytes, from numba, with nothing else changed."""
+    bank_dir = banks["full"].path
+    script = f"""
+import sys, numpy as np
+class NoExtension:
+    def find_spec(self, name, path=None, target=None):
+        if name == "lipsync._flowkernel":
+            raise ImportError("no compiled extension in this test")
+sys.meta_path.insert(0, NoExtension())
+from lipsync import render
+from lipsync.bank import Bank
+from lipsync.yuv import rgb_to_yuv420p
+assert render._flowkernel is None and render.available_kernels() == ["numba"]
+r = render.Renderer(Bank.load({str(bank_dir)!r}))
+frame = r.render("X", "O", 0.4)
+np.save(sys.argv[1], frame)
+np.save(sys.argv[2], rgb_to_yuv420p(frame))
+print(r.kernel)
+"""
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as d:
+        f, y = os.path.join(d, "f.npy"), os.path.join(d, "y.npy")
+        run = subprocess.run([sys.executable, "-c", script, f, y], capture_output=True, text=True)
+        assert run.returncode == 0, run.stderr
+        assert run.stdout.strip() == "numba"
+        frame = np.load(f)
+        here = Renderer(banks["full"]).render("X", "O", 0.4)
+        assert np.abs(frame.astype(int) - here).max() <= 2
+        from lipsync.yuv import rgb_to_yuv420p
+
+        np.testing.assert_array_equal(np.load(y), rgb_to_yuv420p(frame))
