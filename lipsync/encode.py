@@ -274,6 +274,7 @@ class Writer:
         self._bar = None
         self._quiet = quiet
         self._total = total
+        self._own_payload = None  # write()'s buffer, reused frame after frame
         self.folder = os.path.dirname(self.out)
         _check_output_folder(self.folder, self.out)
         try:
@@ -324,8 +325,7 @@ class Writer:
                 f"(size={self.size} is width, height), got {frame.dtype} {frame.shape}"
             )
         try:
-            payload = self.prepare(frame, getattr(self, "_own_payload", None))
-            self._own_payload = payload
+            payload = self._own_payload = self.prepare(frame, self._own_payload)
         except BaseException:
             self._abort()
             raise

@@ -5,9 +5,9 @@ ffmpeg instead of ``rgb24``: half the bytes through the pipe, and no swscale pas
 ffmpeg. swscale's exact path for this conversion (``accurate_rnd+full_chroma_int``, the
 only one that rounds correctly) cost 2.4 CPU-ms per 1280x720 frame (1.6 CPU-s of a 26.7 s
 clip); this fused pass runs in the compiled extension (lipsync._flowkernel; numba's copy
-of it when that is not built) on the caller's thread, outside the GIL. On the benchmark clips 99 % of its output bytes equal
-swscale's; the rest differ by 1-5 levels in chroma at sharp colour edges, where swscale
-filters over more than the 2x2 block.
+of it when that is not built) on the caller's thread, outside the GIL. On the benchmark
+clips 99 % of its output bytes equal swscale's; the rest differ by 1-5 levels in chroma at
+sharp colour edges, where swscale filters over more than the 2x2 block.
 
 The arithmetic is BT.709's (Rec. ITU-R BT.709-6, 3.2-3.5) on 8-bit codes, with the RGB
 values taken as they are (no linearisation, as every video pipeline does): luma
@@ -31,8 +31,12 @@ from typing import Optional
 
 import numpy as np
 
+try:  # the compiled conversion; numba's copy (lipsync._numba_kernels) when it is not built
+    from . import _flowkernel as _compiled
+except ImportError:  # pragma: no cover - depends on the install
+    _compiled = None
+
 _KR, _KB = 0.2126, 0.0722
-_KG = 1.0 - _KR - _KB
 _SHIFT = 16
 _ONE = 1 << _SHIFT
 # Luma weights in fixed point; their sum is 219/255 of one, so white lands on 235 exactly.
@@ -99,12 +103,10 @@ def rgb_to_yuv420p(rgb: np.ndarray, out: Optional[np.ndarray] = None) -> np.ndar
     elif out.dtype != np.uint8 or out.shape != (n,):
         raise ValueError(f"out must be uint8 of shape ({n},), got {out.dtype} {out.shape}")
     rgb = np.ascontiguousarray(rgb)
-    try:
-        from . import _flowkernel
-    except ImportError:  # pragma: no cover - depends on the install
+    if _compiled is not None:
+        _compiled.rgb_to_yuv420p(rgb, out, w, h, _COEFFICIENTS, _YHALF, _CHALF, _SHIFT)
+    else:  # pragma: no cover - depends on the install
         from ._numba_kernels import rgb_to_yuv420p as convert
 
         convert(rgb, out)
-    else:
-        _flowkernel.rgb_to_yuv420p(rgb, out, w, h, _COEFFICIENTS, _YHALF, _CHALF, _SHIFT)
     return out
