@@ -46,7 +46,7 @@ import numpy as np
 
 from .errors import InputError
 from .timeline import VISEME, Segment, Timeline
-from .timing import DEFAULT_CURVE, Curve, get_curve
+from .timing import DEFAULT_CURVE, Curve, get_curve, is_model
 
 # --- tuning constants (seconds) -------------------------------------------------------------
 
@@ -259,10 +259,11 @@ def plan_transitions(segments: Sequence[Tuple[float, float, str]], *,
     return np.stack([t0, t1], axis=1)
 
 
-def sequence(visemes: Timeline, *, fps: float, rest: str, timing: Union[str, Curve] = DEFAULT_CURVE,
+def sequence(visemes: Timeline, *, fps: float, rest: str, timing: Union[str, Curve, object] = DEFAULT_CURVE,
              closures: Iterable[str] = (), duration: Optional[float] = None,
              max_transition: float = MAX_TRANSITION_S, hold_half_width: float = HOLD_HALF_WIDTH_S,
-             max_held_pause: float = MAX_HELD_PAUSE_S, min_segment: float = MIN_SEGMENT_S) -> List[FrameSpec]:
+             max_held_pause: float = MAX_HELD_PAUSE_S, min_segment: float = MIN_SEGMENT_S,
+             classes=None) -> List[FrameSpec]:
     """Turn a viseme timeline into one FrameSpec per output frame.
 
     Parameters
@@ -274,14 +275,20 @@ def sequence(visemes: Timeline, *, fps: float, rest: str, timing: Union[str, Cur
         Output frame rate, 1 to 120. Frame n shows time n / fps.
     rest : str
         The viseme for silence (the bank's rest viseme).
-    timing : str or callable
-        Timing curve name from ``lipsync.timing.CURVES`` or a callable on [0, 1].
+    timing : str, callable or DominanceParams
+        Timing curve name from ``lipsync.timing.CURVES`` or a callable on [0, 1] (rules 5-7
+        with that curve); or ``"dominance"`` (or fitted
+        :class:`~lipsync.coarticulation.DominanceParams`): the coarticulation model of
+        :mod:`lipsync.coarticulation` instead of rules 3-7.
     closures : iterable of str
         Visemes that must be shown fully even when short (the closed-lips viseme).
     duration : float, optional
         Length of the output; default ``visemes.duration``.
     max_transition, hold_half_width, max_held_pause, min_segment : float
         The rule constants (seconds), overridable for experiments.
+    classes : mapping, optional
+        For the dominance model: viseme -> class
+        (:func:`lipsync.coarticulation.viseme_classes` of the map).
 
     Returns
     -------
@@ -295,6 +302,13 @@ def sequence(visemes: Timeline, *, fps: float, rest: str, timing: Union[str, Cur
     >>> [f.shown or "~" for f in sequence(tl, fps=10, rest="X")]
     ['X', 'X', 'X', '~', 'D', 'D']
     """
+    if is_model(timing) or not (isinstance(timing, str) or callable(timing)):
+        # The coarticulation model builds on this module (rules 1-2, FrameSpec), so it is
+        # imported here, when asked for, rather than at the top.
+        from .coarticulation import as_params, dominance_sequence
+
+        return dominance_sequence(visemes, fps=fps, rest=rest, closures=closures, classes=classes,
+                                  params=as_params(timing), duration=duration)
     fps = check_fps(fps)
     if not isinstance(visemes, Timeline):
         raise InputError("sequence() needs a Timeline")
