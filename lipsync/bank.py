@@ -38,7 +38,9 @@ import numpy as np
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
-from .errors import BankError
+from .coarticulation import DominanceOverrides, DominanceParams
+from .errors import BankError, InputError
+from .timing import check_timing
 
 #: Refuse images above this many pixels (8K UHD): a decompression bomb or a mistake, and
 #: each flow of such a size would need hundreds of MB.
@@ -89,7 +91,22 @@ class _BankSpec(BaseModel):
     rest: str
     warp: WarpParams = WarpParams()
     symmetry: bool = False
+    # How this subject's mouth moves when a render does not say (lipsync.timing): a curve
+    # name or "dominance"; banks made from video set "dominance" (issue 21).
+    timing: Optional[str] = None
+    # The dominance model's constants fitted to this speaker (lipsync.coarticulation).
+    coarticulation: Optional[DominanceOverrides] = None
     visemes: Dict[str, _VisemeSpec]
+
+    @field_validator("timing")
+    @classmethod
+    def _known_timing(cls, v):
+        if v is not None:
+            try:
+                return check_timing(v)
+            except InputError as exc:
+                raise ValueError(exc.reason) from None
+        return v
 
     @field_validator("visemes")
     @classmethod
@@ -260,6 +277,12 @@ class Bank:
     features : dict
         Viseme name -> {feature name -> :class:`Feature`} as written in bank.yaml, in file
         order (for drawing and editing curves; empty for banks built by hand in code).
+    timing : str or None
+        bank.yaml's ``timing``: how this subject's mouth moves when a render does not say
+        (a timing curve name or ``dominance``; see :func:`lipsync.coarticulation.resolve_timing`).
+    coarticulation : DominanceParams or None
+        bank.yaml's ``coarticulation``: the dominance model's constants fitted to this
+        speaker (keys it leaves out keep :data:`lipsync.coarticulation.DEFAULT_PARAMS`).
 
     Examples
     --------
@@ -279,6 +302,8 @@ class Bank:
     images: Dict[str, np.ndarray] = field(repr=False)
     lines: Dict[str, np.ndarray] = field(repr=False)
     features: Dict[str, Dict[str, Feature]] = field(default_factory=dict, repr=False)
+    timing: Optional[str] = None
+    coarticulation: Optional[DominanceParams] = field(default=None, repr=False)
 
     @property
     def feature_names(self) -> Tuple[str, ...]:
@@ -741,4 +766,6 @@ def _build(root, data, folder: Path, yaml_path: Path, image_cache) -> Bank:
             fail(f"viseme {v!r}, line {n!r}: lies far outside the {w}x{h} image", ["visemes", v, "lines", n])
 
     return Bank(path=folder, name=spec.name, rest=spec.rest, warp=spec.warp, symmetry=spec.symmetry,
-                names=names, line_names=tuple(line_names), images=images, lines=lines, features=features)
+                names=names, line_names=tuple(line_names), images=images, lines=lines, features=features,
+                timing=spec.timing,
+                coarticulation=spec.coarticulation.apply() if spec.coarticulation is not None else None)

@@ -39,7 +39,7 @@ Examples
 ...                Segment(0.9, 1.3, "X")), kind="viseme")
 >>> specs = dominance_sequence(tl, fps=25, rest="X", closures=["A"])
 >>> [f.shown or "~" for f in specs][8:18]    # 25 fps: closed on the P, then open
-['X', '~', 'A', 'A', 'A', '~', '~', 'D', 'D', 'D']
+['X', '~', 'A', 'A', 'A', '~', 'D', 'D', 'D', 'D']
 """
 
 from __future__ import annotations
@@ -130,35 +130,83 @@ class DominanceParams(BaseModel):
         return DominanceParams.model_validate(data)
 
 
+class ClassTimingOverrides(BaseModel):
+    """Some constants of one class, as bank.yaml's ``coarticulation:`` may give them."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+    dominance: Optional[float] = Field(None, gt=0, le=1e4)
+    anticipation: Optional[float] = Field(None, ge=0, le=0.3)
+    carryover: Optional[float] = Field(None, ge=0, le=0.3)
+
+
+class DominanceOverrides(BaseModel):
+    """bank.yaml's ``coarticulation:``: constants fitted to the bank's speaker, every key optional.
+
+    Examples
+    --------
+    >>> DominanceOverrides(lead=0.03, rounded={"anticipation": 0.2}).apply().rounded.anticipation
+    0.2
+    """
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+    lead: Optional[float] = Field(None, ge=-0.1, le=0.1)
+    closure: Optional[ClassTimingOverrides] = None
+    labiodental: Optional[ClassTimingOverrides] = None
+    rounded: Optional[ClassTimingOverrides] = None
+    open: Optional[ClassTimingOverrides] = None
+    other: Optional[ClassTimingOverrides] = None
+    rest: Optional[ClassTimingOverrides] = None
+
+    def apply(self, base: Optional["DominanceParams"] = None) -> "DominanceParams":
+        """The full constants: ``base`` (default :data:`DEFAULT_PARAMS`) with these replaced."""
+        return (base or DEFAULT_PARAMS).merged(self.model_dump(exclude_none=True))
+
+
 # --- the constants ------------------------------------------------------------------------
 # Fitted on GRID speaker s1's BANK_CLIPS (lipsync.bench.grid; the held-out sentences took no
 # part), phones from lipsync's own aligner with the transcripts, the english-to-rhubarb map,
 # and an ideal bank (each viseme the speaker's median lip opening over the frames aligned
 # to it): :func:`fit` maximised the mean correlation between the predicted and the real lip
-# opening (face mesh, lipsync.face), from starting values taken from the literature (below,
-# "start"). Rounded to two digits: the fit is flat there (the rounded constants score within
-# 0.001 of the fitted ones). ``python -m lipsync.bench --only coarticulation`` refits and
-# prints the held-out figures.
+# opening (face mesh, lipsync.face), from :data:`START_PARAMS` (below, "start"). Rounded to
+# two digits: the fit is flat there (the rounded constants score within 0.002 of the fitted
+# ones). ``python -m lipsync.bench --only coarticulation`` refits and prints the held-out
+# figures.
+#: Where :func:`fit` started (the "start" values below): textbook magnitudes, no lead.
+START_PARAMS = DominanceParams(
+    lead=0.0,
+    closure=ClassTiming(dominance=8.0, anticipation=0.04, carryover=0.04),
+    labiodental=ClassTiming(dominance=4.0, anticipation=0.04, carryover=0.04),
+    rounded=ClassTiming(dominance=2.0, anticipation=0.15, carryover=0.06),
+    open=ClassTiming(dominance=1.0, anticipation=0.08, carryover=0.08),
+    other=ClassTiming(dominance=0.3, anticipation=0.06, carryover=0.06),
+    rest=ClassTiming(dominance=0.5, anticipation=0.1, carryover=0.1),
+)
+
 DEFAULT_PARAMS = DominanceParams(
     # Lips move ahead of the sound they make: the picture of speech leads its sound by tens
-    # of ms (start 0; fitted 18 ms).
-    lead=0.018,
-    # P, B, M: dominant over the vowels around them, short tails: the lips close for the stop
-    # and open at its release (start: 8, 40 ms; fitted 6.6, 38 ms).
-    closure=ClassTiming(dominance=6.6, anticipation=0.04, carryover=0.04),
-    # F, V: as dominant (lower lip to the upper teeth must happen), as brief (start: 4).
-    labiodental=ClassTiming(dominance=8.0, anticipation=0.04, carryover=0.04),
-    # UW, W, R, AO ...: rounding starts ahead of the sound, 120 ms (start: 2, 150 ms).
-    rounded=ClassTiming(dominance=1.2, anticipation=0.12, carryover=0.075),
-    # Vowels: the unit of dominance; their pull reaches 75 ms either side (start: 80 ms).
-    open=ClassTiming(dominance=1.0, anticipation=0.075, carryover=0.075),
+    # of ms (start 0; fitted 15 ms).
+    lead=0.015,
+    # P, B, M: twice a vowel's pull, short tails: the lips close for the stop and open at its
+    # release (start: 8, 40 ms; fitted 2.1, 46 ms). The fit is flat in this dominance,
+    # as every frame inside a closure shows it anyway (``closures``); it matters for the
+    # frames around one, where the lips are on their way to or from closing.
+    closure=ClassTiming(dominance=2.1, anticipation=0.045, carryover=0.045),
+    # F, V: the most dominant (lower lip to the upper teeth must happen, and no frame is
+    # forced for it), as brief as a closure (start 4; fitted 10).
+    labiodental=ClassTiming(dominance=10.0, anticipation=0.045, carryover=0.045),
+    # UW, W, R, AO ...: a vowel's pull, but rounding starts earlier, 120 ms ahead of the
+    # sound (start: 2, 150 ms; fitted 0.98, 122 ms, and 71 ms after).
+    rounded=ClassTiming(dominance=1.0, anticipation=0.12, carryover=0.07),
+    # Vowels: the unit of dominance; their pull reaches 70 ms either side (start: 80 ms).
+    open=ClassTiming(dominance=1.0, anticipation=0.07, carryover=0.07),
     # Tongue consonants (T, S, K, N, L ...) and the close front vowels that share their
-    # viseme in small viseme sets: a third of a vowel's pull, so neighbouring vowels and lip
-    # sounds shape the mouth over them (start 0.3).
-    other=ClassTiming(dominance=0.36, anticipation=0.075, carryover=0.075),
+    # viseme in small viseme sets: a quarter of a vowel's pull, so neighbouring vowels and lip
+    # sounds shape the mouth over them (start 0.3; fitted 0.27).
+    other=ClassTiming(dominance=0.27, anticipation=0.07, carryover=0.07),
     # Silence: weaker than a vowel, so a short pause keeps the shape around it, but its
-    # 200 ms tails relax the mouth into a pause and out of it (start: 0.5, 100 ms).
-    rest=ClassTiming(dominance=0.7, anticipation=0.2, carryover=0.2),
+    # 170 ms tails relax the mouth into a pause and out of it (start: 0.5, 100 ms; fitted
+    # 0.64, 173 ms). This anticipation is the longest, so it sets the live look-ahead.
+    rest=ClassTiming(dominance=0.64, anticipation=0.17, carryover=0.17),
 )
 
 #: A blend this close to one viseme is shown as that viseme. Dominance tails make long
