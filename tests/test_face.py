@@ -401,3 +401,34 @@ def test_ssim_and_psnr_against_plain_references():
     assert psnr(x, y) == pytest.approx(10 * np.log10(255 ** 2 / mse))
     assert psnr(x, y, (2, 3, 12, 20)) == pytest.approx(
         10 * np.log10(255 ** 2 / ((x[3:20, 2:12].astype(float) - y[3:20, 2:12]) ** 2).mean()))
+
+
+FACES = Path(__file__).parent / "data" / "faces"
+
+
+def _photo(name):
+    return cv2.cvtColor(cv2.imread(str(FACES / name)), cv2.COLOR_BGR2RGB)
+
+
+def test_a_face_unlike_the_dev_speaker(mesh):
+    # Eileen Collins' NASA portrait (public domain): a woman, smiling with her teeth showing.
+    # Mouth corners marked by hand on the picture (8x zoom): (128.8, 110.0) and (168.8, 111.9).
+    pts = mesh.find(_photo("astronaut.jpg"))
+    d = _eye_dist(pts)
+    assert np.linalg.norm(pts[61, :2] - [128.8, 110.0]) < 0.1 * d
+    assert np.linalg.norm(pts[291, :2] - [168.8, 111.9]) < 0.1 * d
+    assert M.lip_opening(pts) > 0.1  # the lips are apart
+    from lipsync.face.lines import SYMMETRIC_BELOW, TURNED_ABOVE, face_asymmetry
+
+    assert SYMMETRIC_BELOW < face_asymmetry([pts]) < TURNED_ABOVE
+
+
+def test_a_face_in_profile_is_found_but_warned_about(tmp_path):
+    # A man filming in profile (CC0): the mesh is frontal, so lines on a profile are poor
+    from lipsync.banks.init import init_bank
+
+    for v in "XA":
+        cv2.imwrite(str(tmp_path / f"{v}.png"), cv2.imread(str(FACES / "camera.jpg")))
+    with pytest.warns(FaceWarning, match="turned away from the camera"):
+        r = init_bank(tmp_path)
+    assert set(r.lines.values()) == {"face"}

@@ -362,7 +362,7 @@ def place_face_lines(images: Dict[str, np.ndarray], rest: str, *, labels: Option
     import warnings
 
     from ..face.landmarks import FaceMesh, FaceWarning, NoFaceError
-    from ..face.lines import SYMMETRIC_BELOW, face_asymmetry, face_features, midline_axis
+    from ..face.lines import SYMMETRIC_BELOW, TURNED_ABOVE, face_asymmetry, face_features, midline_axis
 
     mesh = mesh or FaceMesh()
     labels = labels or {v: v for v in images}
@@ -378,6 +378,10 @@ def place_face_lines(images: Dict[str, np.ndarray], rest: str, *, labels: Option
             warnings.warn(str(w.message), FaceWarning, stacklevel=2)
     if not found:
         return None
+    turned = [labels[v] for v, p in found.items() if face_asymmetry([p]) > TURNED_ABOVE]
+    if turned:
+        warnings.warn(f"{', '.join(turned)}: the face is turned away from the camera; lines placed on it "
+                      "will be poor on the far side (a frontal view works best)", FaceWarning, stacklevel=2)
     donor = rest if rest in found else next(v for v in images if v in found)
     points = {v: found.get(v, found[donor]) for v in images}
     sources = {v: "face" if v in found else f"face of {labels[donor]} (no face found in {labels[v]})"

@@ -292,6 +292,13 @@ def midline_axis(points: Sequence[np.ndarray]) -> float:
 SYMMETRIC_BELOW = 0.03
 
 
+#: Above this asymmetry (eye distances) the face is turned well away from the camera (a
+#: three-quarter or profile view: measured 0.73 on a man filmed in profile, 0.05 on a frontal
+#: portrait, 0.05-0.11 on GRID's speaker): the mesh then squeezes a frontal face onto it and
+#: the lines on the far side are poor, which deserves a warning.
+TURNED_ABOVE = 0.25
+
+
 def face_asymmetry(points: Sequence[np.ndarray], axis: Optional[float] = None) -> float:
     """How far a face is from mirror symmetry about a vertical axis, in eye distances (RMS).
 
