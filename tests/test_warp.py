@@ -98,14 +98,14 @@ def test_matches_plain_reference(seed, n, a, b, p):
     np.testing.assert_allclose(m, reference_map((33, 41), dst, src, a, b, p), atol=1e-3)
 
 
-def test_chunking_covers_every_row(monkeypatch):
+def test_blocks_cover_every_column(monkeypatch):
     import lipsync.warp as w
 
     rng = np.random.default_rng(3)
     dst = rng.uniform(0, 30, (4, 2, 2))
     src = dst + rng.normal(0, 3, (4, 2, 2))
     whole = beier_neely_map((29, 31), dst_lines=dst, src_lines=src)
-    monkeypatch.setattr(w, "CHUNK_PIXELS", 100)  # 3 rows per chunk, last chunk partial
+    monkeypatch.setattr(w, "BLOCK_COLUMNS", 7)  # 5 blocks, the last one partial
     np.testing.assert_array_equal(beier_neely_map((29, 31), dst_lines=dst, src_lines=src), whole)
 
 
