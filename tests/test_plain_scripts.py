@@ -121,3 +121,19 @@ def test_render_clip_and_server_from_a_plain_script(workdir, tmp_path):
         print("stored", len(list(__import__("pathlib").Path({str(bank / '.lipsync')!r}).rglob("*.flow"))))
     """)
     assert "stored 36" in run_plain(workdir, "clip", body).stdout
+
+
+def test_run_batch_from_a_plain_script(workdir, tmp_path):
+    # lipsync.batch.run_batch starts a local dask cluster: its workers must not re-run the
+    # script (a LocalCluster's nannies spawn them by re-importing __main__).
+    (tmp_path / "a.tsv").write_text("0.00\tX\n0.40\tD\n0.80\tX\n")
+    (tmp_path / "m.csv").write_text("input,output\na.tsv,a.mp4\n")
+    body = textwrap.dedent(f"""
+        from lipsync.batch import run_batch
+        report = run_batch({str(tmp_path / 'm.csv')!r}, {str(tmp_path / 'out')!r}, workers=2,
+                           cache={str(tmp_path / 'cache')!r}, quiet=True)
+        print(report.summary())
+        assert report.done == 1, report.clips
+    """)
+    run_plain(workdir, "batch", body)
+    assert (tmp_path / "out" / "a.mp4").stat().st_size > 1000
