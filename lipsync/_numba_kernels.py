@@ -1,6 +1,5 @@
-"""The numba kernels: the Beier-Neely field (its one implementation, see lipsync.warp) and
-the portable fallbacks when lipsync._flowkernel is not built or the CPU lacks AVX2 (frame
-kernel, table combine), and for yuv420p conversion.
+"""The portable numba kernels: the fallback when lipsync._flowkernel is not built (the
+Beier-Neely field, yuv420p conversion) or the CPU lacks AVX2 (frame kernel, table combine).
 
 Imported only when used (numba's import and its on-disk cache load cost ~0.3 s, a fifth of
 a short `lipsync render`); compiled once and cached on disk. The same contracts as the
@@ -17,13 +16,11 @@ from .yuv import _CHALF as _CHALF_INT, _COEFFICIENTS, _SHIFT, _YHALF as _YHALF_I
 def beier_neely_field(xs, ys, coef, a, b, block, out):  # pragma: no cover - compiled
     """out (h, w, 2) float32 = Beier-Neely displacement at the pixels ys x xs (lipsync.warp).
 
-    ``coef`` (L, 14) float64 holds each line's affine coefficients in the order of
-    :data:`lipsync.warp._COEF_ORDER`. Each quantity is a column part (``c * x``) plus a row
-    part (``c * y + c0``), each computed in float64 and rounded to float32 before they are
-    added, as the old numpy kernel did: large offsets stay exact. Columns go in blocks of
-    ``block``: a block's column parts (4 x L x block float32) stay in cache while every row
-    reuses them, and the pixel loop runs over contiguous floats, which LLVM vectorises.
-    Runs without the GIL, so threads computing different pairs run in parallel.
+    The compiled ``beier_neely_field`` (lipsync/_flowkernel.c) in numba: ``coef`` (L, 14)
+    float64 holds each line's affine coefficients in the order of
+    :data:`lipsync.warp._COEF_ORDER`; each quantity is a column part (``c * x``) plus a row
+    part (``c * y + c0``), each rounded to float32 before they are added; columns go in
+    blocks of ``block`` whose column parts stay in cache. Without the GIL, like the C copy.
     """
     n_lines = coef.shape[0]
     w = xs.shape[0]

@@ -17,11 +17,11 @@ line does not move, so identical line sets give the identity map without roundin
 and it is affine in (x, y): per line every quantity is a sum of a row part and a column
 part, so a pixel costs adds, one square root and one division per line.
 
-The per-pixel loop is a numba kernel (``lipsync._numba_kernels.beier_neely_field``), one
-pass over each block of pixels instead of numpy's ~15 passes per line, and it runs without
-the GIL: preprocessing computes pairs in threads of the calling process (no worker
-processes, which a library must not start, see lipsync.preprocess). On the toon's 36 pairs
-it took the field from 2.0 of 3.5 CPU-s per preprocess to ~0.8.
+The per-pixel loop is compiled (``beier_neely_field`` in lipsync/_flowkernel.c, GCC's
+vectorised AVX2 copy where the CPU has it; numba's copy in lipsync._numba_kernels when the
+extension is not built): one pass over each block of pixels instead of numpy's ~15 passes
+per line, and without the GIL, so preprocessing computes pairs in threads of the calling
+process (no worker processes, which a library must not start; see lipsync.preprocess).
 """
 
 from __future__ import annotations
@@ -29,6 +29,11 @@ from __future__ import annotations
 from typing import Optional, Tuple
 
 import numpy as np
+
+try:  # the compiled field kernel; numba's copy (lipsync._numba_kernels) when it is not built
+    from . import _flowkernel as _compiled
+except ImportError:  # pragma: no cover - depends on the install
+    _compiled = None
 
 #: Columns per block of the field kernel: the per-line column terms of a block (4 x lines x
 #: 64 float32, 42 KB for the toon's 41 lines) stay in cache while every row reuses them, at
@@ -88,7 +93,7 @@ def _line_coefficients(dst: np.ndarray, src: np.ndarray, p: float):
 
 def beier_neely_displacement(shape: Tuple[int, ...], *, dst_lines, src_lines, a: float = 1.0,
                              b: float = 2.0, p: float = 0.5,
-                             columns: Optional[Tuple[int, int]] = None) -> np.ndarray:
+                             columns: Optional[Tuple[int, int]] = None, kernel: Optional[str] = None) -> np.ndarray:
     """Displacement field ``X_src - X`` of the Beier–Neely warp, float32 ``(H, W, 2)``.
 
     Parameters
@@ -101,6 +106,10 @@ def beier_neely_displacement(shape: Tuple[int, ...], *, dst_lines, src_lines, a:
         Weight parameters: ``weight = (length**p / (a + dist))**b``.
     columns : (int, int), optional
         Compute only columns ``[c0, c1)``; the result then has width ``c1 - c0``.
+    kernel : {None, "plain", "numba"}, optional
+        Force a kernel (for tests and benchmarks): by default the compiled one (its AVX2
+        path where the CPU has it), ``plain`` its portable path, ``numba`` numba's copy.
+        All give the same floats up to rounding order (see tests/test_warp.py).
 
     Returns
     -------
@@ -130,10 +139,15 @@ def beier_neely_displacement(shape: Tuple[int, ...], *, dst_lines, src_lines, a:
         return out
     coef = _line_coefficients(dst, src, p)
     table = np.ascontiguousarray(np.stack([coef[k] for k in _COEF_ORDER], axis=1), dtype=np.float64)
-    from ._numba_kernels import beier_neely_field  # numba loads only when a field is computed
+    xs = np.arange(c0, c1, dtype=np.float64)
+    ys = np.arange(h, dtype=np.float64)
+    if _compiled is not None and kernel != "numba":
+        _compiled.beier_neely_field(xs, ys, table, out, width, h, len(table), int(BLOCK_COLUMNS),
+                                    float(a), float(b), 0 if kernel == "plain" else 2)
+    else:
+        from ._numba_kernels import beier_neely_field  # numba loads only without the compiled kernel
 
-    beier_neely_field(np.arange(c0, c1, dtype=np.float64), np.arange(h, dtype=np.float64), table,
-                      float(a), float(b), int(BLOCK_COLUMNS), out)
+        beier_neely_field(xs, ys, table, float(a), float(b), int(BLOCK_COLUMNS), out)
     return out
 
 
