@@ -13,7 +13,10 @@ _CFLAGS = ["/O2"] if os.name == "nt" else ["-O3", "-std=c99", "-Wall", "-fno-wra
                                            "-fno-math-errno", "-fno-trapping-math"]
 
 setup(
-    packages=find_packages(include=["lipsync", "lipsync.*"]) + ["lipsync._visemes", "lipsync._configs"],
+    # lipsync.face.models holds only data (the face models and their licence): named here so
+    # setuptools ships it as a data package instead of warning that it is not listed.
+    packages=find_packages(include=["lipsync", "lipsync.*"]) + ["lipsync.face.models", "lipsync._visemes",
+                                                                  "lipsync._configs"],
     package_dir={"lipsync._visemes": "visemes", "lipsync._configs": "configs"},
     # The flow renderer's frame kernel (AVX2 gathers, chosen at run time by CPU), yuv420p
     # conversion and the Beier-Neely field. optional: without a C compiler the build warns
