@@ -654,9 +654,10 @@ def fit(tracks: Sequence[Tuple[Sequence[Tuple[float, float, str]], np.ndarray]],
 
     Parameters
     ----------
-    tracks : sequence of (segments, numpy.ndarray)
-        Per recording: its planned viseme segments (:func:`plan`) and the real measure per
-        frame (e.g. :func:`lipsync.face.measure.lip_opening` of its face track).
+    tracks : sequence of (segments, numpy.ndarray) or (segments, numpy.ndarray, fps)
+        Per recording: its planned viseme segments (:func:`plan`), the real measure per
+        frame (e.g. :func:`lipsync.face.measure.lip_opening` of its face track; NaN frames,
+        where no face was found, are left out), and its frame rate if not ``fps``.
     values : mapping
         The measure of each viseme's image in the bank (or the speaker's median over frames
         aligned to it: an "ideal bank").
@@ -683,21 +684,24 @@ def fit(tracks: Sequence[Tuple[Sequence[Tuple[float, float, str]], np.ndarray]],
     True
     """
     closures = list(closures)
-    tracks = [(list(segs), np.asarray(real, dtype=np.float64)) for segs, real in tracks]
-    if not tracks:
-        raise InputError("fit() needs at least one track")
+    prepared = []
+    for track in tracks:
+        segs, real = track[0], np.asarray(track[1], dtype=np.float64)
+        rate = float(track[2]) if len(track) > 2 else fps
+        ok = np.isfinite(real)          # frames where the face was lost do not count
+        if ok.sum() >= 3 and real[ok].std() > 0:
+            prepared.append((list(segs), real, ok, rate))
+    if not prepared:
+        raise InputError("fit() needs at least one track with a moving measure")
 
     def loss(x: np.ndarray) -> float:
         params = _from_vector(x, start)
         rs = []
-        for segs, real in tracks:
-            specs = dominance_frames(segs, fps=fps, classes=classes, params=params, closures=closures,
+        for segs, real, ok, rate in prepared:
+            specs = dominance_frames(segs, fps=rate, classes=classes, params=params, closures=closures,
                                      stop=len(real))
-            pred = predicted(specs, values)
-            if pred.std() == 0 or real.std() == 0:
-                rs.append(0.0)
-            else:
-                rs.append(float(np.corrcoef(pred, real)[0, 1]))
+            pred = predicted(specs, values)[ok]
+            rs.append(0.0 if pred.std() == 0 else float(np.corrcoef(pred, real[ok])[0, 1]))
         return -float(np.mean(rs))
 
     x = _to_vector(start)
@@ -736,3 +740,75 @@ def _nelder_mead(f, x0: np.ndarray, *, step: float, iterations: int, tol: float 
                 vals = [vals[0]] + [f(p) for p in pts[1:]]
     i = int(np.argmin(vals))
     return pts[i], vals[i]
+
+
+#: Fitting a speaker in ``lipsync init --video`` (:func:`fit_speaker`): fewer simplex steps
+#: than the dev fit, from the defaults (measured on GRID s1's 10 bank sentences: the same
+#: constants as 600 steps x 3 runs, 4.4 s of CPU instead of 6).
+SPEAKER_ITERATIONS = 300
+SPEAKER_RESTARTS = 1
+#: Less speech than this (seconds of frames inside sounds) says too little about how the
+#: speaker's lips move: the defaults are kept.
+MIN_SPEECH_S = 5.0
+
+
+def fit_speaker(recordings, values: Mapping[str, float], pmap) -> Optional[DominanceParams]:
+    """The dominance constants for one speaker, from videos of them talking (or None).
+
+    What ``lipsync init --video`` stores in the new bank's bank.yaml (``coarticulation:``).
+    Measured on GRID s1 (``make bench``, ``coarticulation_rendered``): with the bank made
+    from the 10 bank sentences, held-out sentences rendered with constants fitted this way
+    follow the real lips slightly better than with :data:`DEFAULT_PARAMS`.
+
+    Parameters
+    ----------
+    recordings : sequence of (segments, numpy.ndarray, float)
+        Per video: its viseme segments (start, end, viseme) covering it, the lip opening
+        per frame (:func:`lipsync.face.measure.lip_opening`; NaN where no face), its fps.
+    values : mapping
+        Each viseme's lip opening in the bank's pictures.
+    pmap : PhonemeMap
+        The map the bank was made with (its visemes' classes and closures).
+
+    Returns
+    -------
+    DominanceParams or None
+        None when the videos hold less than :data:`MIN_SPEECH_S` of speech.
+    """
+    from .timeline import Segment
+
+    classes = viseme_classes(pmap)
+    rest = pmap.silence
+    tracks, speech = [], 0.0
+    for segments, opening, rate in recordings:
+        n = len(opening)
+        tl = Timeline(tuple(Segment(s, e, v) for s, e, v in segments), kind=VISEME, stated_end=n / rate)
+        segs = plan(tl, rest=rest, closures=pmap.closures, duration=n / rate)
+        speech += sum(min(e, n / rate) - s for s, e, v in segs if v != rest and s < n / rate)
+        tracks.append((segs, opening, rate))
+    if speech < MIN_SPEECH_S or not tracks:
+        return None
+    try:
+        return fit(tracks, values, fps=tracks[0][2], classes=classes, closures=pmap.closures,
+                   iterations=SPEAKER_ITERATIONS, restarts=SPEAKER_RESTARTS)
+    except InputError:
+        return None
+
+
+def rounded(params: DominanceParams) -> dict:
+    """The constants as bank.yaml stores them: dominance to 2 digits, times to the ms.
+
+    Examples
+    --------
+    >>> rounded(DEFAULT_PARAMS)["rounded"]
+    {'dominance': 1.0, 'anticipation': 0.12, 'carryover': 0.07}
+    """
+    def sig(x: float) -> float:
+        return float(f"{x:.2g}")
+
+    out: dict = {"lead": round(params.lead, 3)}
+    for c in CLASSES:
+        t = params.of(c)
+        out[c] = {"dominance": sig(t.dominance), "anticipation": round(t.anticipation, 3),
+                  "carryover": round(t.carryover, 3)}
+    return out

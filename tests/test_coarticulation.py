@@ -413,3 +413,32 @@ def test_dominance_follows_real_lips_better_than_todays_sequencer_and_cuts(grid_
     mean = {k: float(np.mean(v)) for k, v in r.items()}
     assert mean["dominance"] > mean["today"] + 0.03 and mean["dominance"] > mean["cuts"] + 0.05, mean
     assert min(r["dominance"]) > 0.65, r
+
+
+def test_fit_speaker_from_videos_and_what_init_video_writes(tmp_path):
+    # Recordings as lipsync init --video has them: viseme segments, lip opening per frame (a
+    # lost face is NaN), fps. Made by the model with a known lead; fitted back, stored rounded
+    # in bank.yaml and loaded again.
+    from lipsync.videobank.write import bank_text
+
+    pmap = load_map("english-to-rhubarb")
+    true = co.DEFAULT_PARAMS.merged({"lead": 0.045})
+    values = {"A": 0.03, "B": 0.05, "C": 0.08, "D": 0.1, "E": 0.035, "F": 0.03, "G": 0.03, "H": 0.055, "X": 0.02}
+    recordings = []
+    for seed in range(3):
+        tl = _random_visemes(seed)
+        segs = co.plan(tl, rest=REST, closures=["A"])
+        n = frame_count(tl.duration, 30)
+        real = co.predicted(co.dominance_frames(segs, fps=30, classes=CLASSES, params=true, closures=["A"], stop=n),
+                            values)
+        real[10:14] = np.nan
+        recordings.append(([(s.start, s.end, s.label) for s in tl], real, 30.0))
+    fitted = co.fit_speaker(recordings, values, pmap)
+    assert fitted is not None and fitted.lead == pytest.approx(0.045, abs=0.012)
+    assert co.fit_speaker([(r[0], r[1][:60], 30.0) for r in recordings[:1]], values, pmap) is None  # 2 s: too little
+    bank = Bank.load(default_bank_dir())
+    text = bank_text("me", "X", {v: f"{v}.png" for v in bank.names}, bank.features, symmetric=True, header=[],
+                     timing="dominance", coarticulation=co.rounded(fitted))
+    assert "timing: dominance" in text and "coarticulation: {lead: " in text
+    loaded = Bank.from_text(text, default_bank_dir())
+    assert loaded.timing == "dominance" and loaded.coarticulation.lead == round(fitted.lead, 3)

@@ -350,3 +350,83 @@ def figure(ctx: Context, rows: List[dict]) -> None:
                      **{f"rmse {m}": round(clip_rows[m][i][2], 4) for m in MODELS}})
     rows.extend(_lookahead_rows())
     rows.extend(_toon_rows())
+
+
+# --- a real speaker's bank made by ``lipsync init --video``, rendered --------------------------
+
+def bank_values(bank) -> Dict[str, float]:
+    """Each viseme's lip opening in a bank of a real face (the face mesh on its picture)."""
+    from ..face import measure as M
+    from ..face.track import track_frames
+
+    tr = track_frames([bank.images[v] for v in bank.names], fps=FPS, smooth=False)
+    opening = M.lip_opening(tr.points)
+    return {v: float(x) for v, x in zip(bank.names, opening)}
+
+
+def _video_bank(ctx: Context):
+    """The bank ``lipsync init --video`` makes from BANK_CLIPS (the videobank figure's, when
+    it ran in this process; made here otherwise)."""
+    from ..bank import Bank
+    from ..videobank import make_bank
+
+    out = ctx.tmp / "grid-s1"
+    if not (out / "bank.yaml").is_file():
+        videos = [G.video(c) for c in G.BANK_CLIPS]
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            make_bank(out, videos, texts={v: G.transcript(c) for v, c in zip(videos, G.BANK_CLIPS)},
+                      force=True, quiet=True)
+    return Bank.load(out)
+
+
+@FIGURES.decorator("coarticulation_rendered")
+def rendered_figure(ctx: Context, rows: List[dict]) -> None:
+    from .. import coarticulation as co
+    from ..face.landmarks import FaceMesh
+    from .videobank import judge_clip
+
+    if not all(G.video(c).is_file() for c in G.BANK_CLIPS):
+        rows.append({"figure": "coarticulation_rendered", "case": f"skipped: no GRID bank clips in {G.grid_dir()}"})
+        return
+    pmap = _pmap()
+    bank = _video_bank(ctx)
+    values = bank_values(bank)
+    fitted = bank.coarticulation    # what init --video fitted to the speaker (None: the defaults)
+    held = G.held_out()[:8] if ctx.quick else G.held_out()
+    # predicted with the real bank's pictures (no rendering): as the ideal-bank figure
+    pred = _scores(held, "align", "opening", values, pmap=pmap)
+    for m in MODELS:
+        rows.append({"figure": "coarticulation", "bank": "init --video (pictures)", "phones": "align",
+                     "measure": "opening", "timing": m, "r held-out": _mean(pred[m]), "rmse held-out": _mean(pred[m], 2)})
+    if fitted is not None:
+        refit_pred = _scores(held, "align", "opening", values, params=fitted, pmap=pmap)["dominance"]
+        rows.append({"figure": "coarticulation", "bank": "init --video (pictures)", "phones": "align",
+                     "measure": "opening", "timing": "dominance fitted by init --video", "r held-out": _mean(refit_pred),
+                     "rmse held-out": _mean(refit_pred, 2)})
+    # rendered through the renderer, the face tracked on the rendered frames
+    mesh = FaceMesh()
+    cases = {"today": dict(timing="sqrt-fast-middle", methods=("flow morph", "hard cuts")),
+             "dominance": dict(timing=co.DEFAULT_PARAMS, methods=("flow morph",))}
+    if fitted is not None:
+        cases["the bank's own (dominance fitted by init --video)"] = dict(timing=None, methods=("flow morph",))
+    r: Dict[str, list] = {}
+    pooled: Dict[str, list] = {}
+    for clip in held:
+        for name, kw in cases.items():
+            got = judge_clip(bank, clip, mesh, **kw)
+            real = got["real"]["open"]
+            pooled.setdefault("real " + name, []).append(real)
+            for method in kw["methods"]:
+                label = "cuts" if method == "hard cuts" else name
+                r.setdefault(label, []).append(G.correlation(got[method]["open"], real))
+                pooled.setdefault(label, []).append(got[method]["open"])
+    for label in ["today", "cuts"] + list(cases)[1:]:
+        real_all = np.concatenate(pooled["real " + ("today" if label == "cuts" else label)])
+        rows.append({"figure": "coarticulation_rendered", "bank": "init --video from BANK_CLIPS",
+                     "timing": label, "clips": len(held), "lip-opening r (mean over clips)": round(float(np.mean(r[label])), 3),
+                     "pooled r": round(G.correlation(np.concatenate(pooled[label]), real_all), 3),
+                     "clips above cuts": f"{sum(a > b for a, b in zip(r[label], r['cuts']))}/{len(held)}"})
+    if fitted is not None:
+        rows.append({"figure": "coarticulation_rendered", "bank": "constants fitted by init --video",
+                     "timing": _short(fitted), "look-ahead ms": round(1000 * co.lookahead(fitted))})

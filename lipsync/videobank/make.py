@@ -241,6 +241,17 @@ def make_bank(outdir: PathLike, videos: Sequence[PathLike], *, text: Optional[st
     features = face_features(pts, (h, w), axis=frame.axis)
     t = lap("choose", t)
 
+    # --- how this speaker's mouth moves (issue 21): the dominance model, its constants fitted
+    # to the lips in these videos with the chosen pictures' openings (lipsync.coarticulation)
+    from ..coarticulation import fit_speaker, rounded
+    from ..face.measure import lip_opening
+
+    fitted = fit_speaker([([(x.start, x.end, x.label) for x in sp.visemes], lip_opening(tr.points), tr.fps)
+                          for sp, tr in zip(speeches, tracks)],
+                         {v: float(lip_opening(p)) for v, p in pts.items()}, pmap)
+    constants = rounded(fitted) if fitted is not None else None
+    t = lap("timing", t)
+
     files = write.image_names(order)
     report = {
         "made_by": "lipsync init --video",
@@ -260,6 +271,8 @@ def make_bank(outdir: PathLike, videos: Sequence[PathLike], *, text: Optional[st
         } for s, sp, tr, reg in zip(sources, speeches, tracks, regs)],
         "visemes": {},
         "missing": {v: {"uses": u, "record": _what_to_record([v], pmap)} for v, u in missing.items()},
+        "timing": {"model": "dominance", "fitted": constants is not None,
+                   "constants": constants if constants is not None else "defaults (too little speech to fit)"},
     }
     for v in order:
         c = source_of[v]
@@ -276,7 +289,8 @@ def make_bank(outdir: PathLike, videos: Sequence[PathLike], *, text: Optional[st
             if files[v] not in images:
                 images[files[v]] = matched[(c.video, c.frame)]
                 write.write_png(tmp / files[v], images[files[v]])
-        text_yaml = write.bank_text(outdir.resolve().name, rest, files, features, symmetric=symmetric, header=header)
+        text_yaml = write.bank_text(outdir.resolve().name, rest, files, features, symmetric=symmetric, header=header,
+                                    timing="dominance", coarticulation=constants)
         Bank.from_text(text_yaml, tmp, images=images)  # never write a bank that would not load
         from ..banks.yamlio import write_bank_text
 
