@@ -25,12 +25,13 @@ from typing import Iterator, List, Optional, Union
 import numpy as np
 
 from .bank import Bank
+from .coarticulation import resolve_timing, viseme_classes
 from .phonemes import DEFAULT_MAP, PhonemeMap, bank_viseme_timeline, load_map
+from .readers import read_timeline
 from .render import Renderer
 from .sequencer import FrameSpec, check_fps, sequence
 from .store import FlowStore
-from .timeline import Timeline, read_timeline
-from .coarticulation import resolve_timing, viseme_classes
+from .timeline import Timeline
 
 
 class Animator:

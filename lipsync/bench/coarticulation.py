@@ -234,7 +234,7 @@ def _toon_rows() -> List[dict]:
     from .._data import default_bank_dir
     from ..animator import Animator, _still_key
     from ..bank import Bank
-    from ..timeline import read_timeline
+    from ..readers import read_timeline
 
     root = Path(__file__).resolve().parents[2]
     files = [root / "samples" / "hello.phn", root / "samples" / "balloons.TextGrid",
@@ -276,7 +276,7 @@ def _lookahead_rows() -> List[dict]:
     from ..animator import Animator
     from ..bank import Bank
     from ..live import LiveAnimator, replay_specs
-    from ..timeline import read_timeline
+    from ..readers import read_timeline
 
     root = Path(__file__).resolve().parents[2]
     files = [root / "samples" / "hello.phn", root / "samples" / "balloons.TextGrid",
