@@ -50,11 +50,11 @@ With ``timing="dominance"`` (:mod:`lipsync.coarticulation`) the same window is p
 the model instead of rules 3-7. A sound starting at ``s`` weighs on frames after
 ``s - lead - anticipation`` only, and on nothing later than its end plus its carry-over, so:
 the look-ahead is ``lead + the longest anticipation`` (:func:`lipsync.coarticulation.lookahead`,
-185 ms with the default constants), and a cut at ``c`` inside ``G`` is valid once the
+177 ms with the default constants), and a cut at ``c`` inside ``G`` is valid once the
 carry-over of every sound before ``G`` has ended (``c >= G.start + carry-over - lead``, and
 at least a frame in, for a closure's forced frame) and while no sound after ``G`` reaches
 back to it (``G.end - c >= look-ahead``): with the defaults, inside pauses and sounds of
-340 ms or more. No sound is dropped or held, so nothing else reaches across ``G``.
+330 ms or more. No sound is dropped or held, so nothing else reaches across ``G``.
 
 Examples
 --------
