@@ -53,7 +53,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from .errors import InputError
-from .sequencer import MAX_FRAMES, FrameSpec, check_fps, frame_count, plan_segments
+from .sequencer import FrameSpec, checked_frames, plan_segments
 from .timeline import VISEME, Timeline
 from .timing import DEFAULT_CURVE, check_timing, is_model
 
@@ -558,19 +558,8 @@ def dominance_sequence(visemes: Timeline, *, fps: float, rest: str, closures: It
     >>> len(dominance_sequence(tl, fps=10, rest="X"))
     6
     """
-    fps = check_fps(fps)
-    if not isinstance(visemes, Timeline):
-        raise InputError("sequence() needs a Timeline")
-    if visemes.kind != VISEME:
-        raise InputError("sequence() needs a viseme timeline; map the phonemes first (map_timeline)",
-                         path=visemes.path)
+    fps, total, n_frames = checked_frames(visemes, fps, duration)
     closure_set = set(closures)
-    total = visemes.duration if duration is None else float(duration)
-    n_frames = frame_count(total, fps)
-    if n_frames > MAX_FRAMES:
-        raise InputError(f"the timeline lasts {total:g} s: {n_frames} frames at {fps:g} fps, above the "
-                         f"limit of {MAX_FRAMES} (a time or frame number in the file is likely wrong)",
-                         path=visemes.path)
     if n_frames == 0:
         return []
     segs = plan(visemes, rest=rest, closures=closure_set, duration=total)

@@ -309,26 +309,38 @@ def sequence(visemes: Timeline, *, fps: float, rest: str, timing: Union[str, Cur
 
         return dominance_sequence(visemes, fps=fps, rest=rest, closures=closures, classes=classes,
                                   params=as_params(timing), duration=duration)
-    fps = check_fps(fps)
-    if not isinstance(visemes, Timeline):
-        raise InputError("sequence() needs a Timeline")
-    if visemes.kind != VISEME:
-        raise InputError("sequence() needs a viseme timeline; map the phonemes first (map_timeline)",
-                         path=visemes.path)
+    fps, total, n_frames = checked_frames(visemes, fps, duration)
     curve = get_curve(timing)
     closure_set = set(closures)
-    total = visemes.duration if duration is None else float(duration)
-    n_frames = frame_count(total, fps)
-    if n_frames > MAX_FRAMES:  # found with the fuzz tests' huge numbers: Moho frame 10**9 asked for 7.8 GB here
-        raise InputError(f"the timeline lasts {total:g} s: {n_frames} frames at {fps:g} fps, above the "
-                         f"limit of {MAX_FRAMES} (a time or frame number in the file is likely wrong)",
-                         path=visemes.path)
     if n_frames == 0:
         return []
     segs = plan_segments(visemes, rest=rest, closures=closure_set, max_held_pause=max_held_pause,
                          min_segment=min_segment, duration=total)
     windows = plan_transitions(segs, max_transition=max_transition, hold_half_width=hold_half_width)
     return frame_specs(segs, windows, fps=fps, curve=curve, closures=closure_set, stop=n_frames)
+
+
+def checked_frames(visemes: Timeline, fps: float, duration: Optional[float] = None) -> Tuple[float, float, int]:
+    """``(fps, duration, frame count)`` of a viseme timeline to sequence, or InputError.
+
+    Examples
+    --------
+    >>> checked_frames(Timeline((Segment(0, 1.01, "A"),), kind="viseme"), 24)
+    (24.0, 1.01, 25)
+    """
+    fps = check_fps(fps)
+    if not isinstance(visemes, Timeline):
+        raise InputError("sequence() needs a Timeline")
+    if visemes.kind != VISEME:
+        raise InputError("sequence() needs a viseme timeline; map the phonemes first (map_timeline)",
+                         path=visemes.path)
+    total = visemes.duration if duration is None else float(duration)
+    n_frames = frame_count(total, fps)
+    if n_frames > MAX_FRAMES:  # found with the fuzz tests' huge numbers: Moho frame 10**9 asked for 7.8 GB here
+        raise InputError(f"the timeline lasts {total:g} s: {n_frames} frames at {fps:g} fps, above the "
+                         f"limit of {MAX_FRAMES} (a time or frame number in the file is likely wrong)",
+                         path=visemes.path)
+    return fps, total, n_frames
 
 
 def frame_specs(segments: Sequence[Tuple[float, float, str]], windows: np.ndarray, *, fps: float, curve: Curve,

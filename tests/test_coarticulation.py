@@ -332,19 +332,27 @@ def test_cli_timeline_frames_with_dominance(capsys):
 
 # --- fitting --------------------------------------------------------------------------------
 
+VALUES = {"A": 0.03, "B": 0.05, "C": 0.08, "D": 0.1, "E": 0.035, "F": 0.03, "G": 0.03, "H": 0.055, "X": 0.02}
+
+
+def _lips_made_by(params, seeds, fps):
+    """(timeline, planned segments, lip opening per frame) the model makes with ``params``."""
+    out = []
+    for seed in seeds:
+        tl = _random_visemes(seed)
+        segs = co.plan(tl, rest=REST, closures=["A"])
+        specs = co.dominance_frames(segs, fps=fps, classes=CLASSES, params=params, closures=["A"],
+                                    stop=frame_count(tl.duration, fps))
+        out.append((tl, segs, co.predicted(specs, VALUES)))
+    return out
+
+
 def test_fit_recovers_the_constants_that_made_a_trajectory():
     # "Real" lips made by the model itself with known constants (a 40 ms lead, slow rounding):
     # fitted from the defaults, the lead and the rounded anticipation come back.
     true = co.DEFAULT_PARAMS.merged({"lead": 0.04, "rounded": {"anticipation": 0.2}})
-    values = {"A": 0.03, "B": 0.05, "C": 0.08, "D": 0.1, "E": 0.035, "F": 0.03, "G": 0.03, "H": 0.055, "X": 0.02}
-    tracks = []
-    for seed in range(6):
-        tl = _random_visemes(seed)
-        segs = co.plan(tl, rest=REST, closures=["A"])
-        n = frame_count(tl.duration, 25)
-        real = co.predicted(co.dominance_frames(segs, fps=25, classes=CLASSES, params=true, closures=["A"], stop=n),
-                            values)
-        tracks.append((segs, real))
+    values = VALUES
+    tracks = [(segs, real) for _, segs, real in _lips_made_by(true, range(6), 25)]
     fitted = co.fit(tracks, values, fps=25, classes=CLASSES, closures=["A"], iterations=300, restarts=1)
     assert fitted.lead == pytest.approx(0.04, abs=0.01)
     assert fitted.rounded.anticipation == pytest.approx(0.2, abs=0.05)
@@ -422,15 +430,9 @@ def test_fit_speaker_from_videos_and_what_init_video_writes(tmp_path):
     from lipsync.videobank.write import bank_text
 
     pmap = load_map("english-to-rhubarb")
-    true = co.DEFAULT_PARAMS.merged({"lead": 0.045})
-    values = {"A": 0.03, "B": 0.05, "C": 0.08, "D": 0.1, "E": 0.035, "F": 0.03, "G": 0.03, "H": 0.055, "X": 0.02}
+    values = VALUES
     recordings = []
-    for seed in range(3):
-        tl = _random_visemes(seed)
-        segs = co.plan(tl, rest=REST, closures=["A"])
-        n = frame_count(tl.duration, 30)
-        real = co.predicted(co.dominance_frames(segs, fps=30, classes=CLASSES, params=true, closures=["A"], stop=n),
-                            values)
+    for tl, _, real in _lips_made_by(co.DEFAULT_PARAMS.merged({"lead": 0.045}), range(3), 30):
         real[10:14] = np.nan
         recordings.append(([(s.start, s.end, s.label) for s in tl], real, 30.0))
     fitted = co.fit_speaker(recordings, values, pmap)

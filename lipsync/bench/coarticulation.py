@@ -228,13 +228,20 @@ def _projection(clips, source: str, values, pmap) -> dict:
             "frames > 0.1 %": round(100 * float((lost_all > 0.1).mean()), 1)}
 
 
+def _read(path: Path):
+    from ..readers import read_timeline
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")   # Gentle's and TTS files' unknown words: the map's fallback
+        return read_timeline(path)
+
+
 def _toon_rows() -> List[dict]:
     """On the drawn toon, the sample timelines: held frames (written again, not rendered),
     one-frame pops of a non-closure, and sequencing time per minute of speech."""
     from .._data import default_bank_dir
     from ..animator import Animator, _still_key
     from ..bank import Bank
-    from ..readers import read_timeline
 
     root = Path(__file__).resolve().parents[2]
     files = [root / "samples" / "hello.phn", root / "samples" / "balloons.TextGrid",
@@ -247,9 +254,7 @@ def _toon_rows() -> List[dict]:
         for f in files:
             if not f.is_file():
                 continue
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
-                tl = read_timeline(f)
+            tl = _read(f)
             t0 = time.process_time()
             anim = Animator(bank, tl, fps=25, timing=timing)
             cpu += time.process_time() - t0
@@ -276,7 +281,6 @@ def _lookahead_rows() -> List[dict]:
     from ..animator import Animator
     from ..bank import Bank
     from ..live import LiveAnimator, replay_specs
-    from ..readers import read_timeline
 
     root = Path(__file__).resolve().parents[2]
     files = [root / "samples" / "hello.phn", root / "samples" / "balloons.TextGrid",
@@ -290,9 +294,7 @@ def _lookahead_rows() -> List[dict]:
         for f in files:
             if not f.is_file():
                 continue
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
-                tl = read_timeline(f)
+            tl = _read(f)
             offline = Animator(bank, tl, fps=25, timing=timing).specs
             need = 0.0
             for lag in np.arange(0.0, bound + 0.005, 0.02):
