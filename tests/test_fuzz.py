@@ -54,7 +54,8 @@ from lipsync._data import data_dir, default_bank_dir
 from lipsync.bank import MAX_IMAGE_PIXELS, MAX_LINES, MAX_VISEMES, Bank
 from lipsync.errors import BankError, InputError, MapError, TimelineError
 from lipsync.phonemes import PhonemeMap, load_map
-from lipsync.timeline import READERS, Timeline, read_timeline
+from lipsync.timeline import Timeline
+from lipsync.readers import READERS, read_timeline
 
 ROOT = Path(__file__).resolve().parent.parent
 DATA = ROOT / "tests" / "data"
