@@ -105,25 +105,26 @@ def _unit(still: np.ndarray) -> np.ndarray:
     return c * (still - (left + right) / 2)
 
 
-def reference_pose(still_points: Sequence[np.ndarray]) -> np.ndarray:
+def reference_pose(meshes: Sequence[np.ndarray]) -> np.ndarray:
     """The reference still-point shape in unit coordinates, complex ``(8,)``.
 
     Parameters
     ----------
-    still_points : sequence of numpy.ndarray
-        ``(N_i, 8, 2)`` still points (``points[:, STILL_POINTS]``) of every frame with a face.
+    meshes : sequence of numpy.ndarray
+        ``(N_i, 468, 2|3)`` meshes of every frame with a face (one array per video), or
+        just their still points ``(N_i, 8, 2)``.
 
     Examples
     --------
     >>> rng = np.random.default_rng(1)
     >>> base = rng.normal(size=(8, 2))
     >>> a = np.stack([base * s + d for s, d in ((1, 0), (2, 5), (3, -1))])
-    >>> ref = reference_pose([a])
+    >>> ref = reference_pose([a])      # three frames' still points
     >>> _, _, res = fit_similarity(_complex(a), ref)
     >>> float(res.max()) < 1e-9
     True
     """
-    z = np.concatenate([_complex(p) for p in still_points])
+    z = np.concatenate([_complex(p[:, _STILL] if p.shape[1] == 468 else p) for p in meshes])
     ref = _unit(z[0])
     for _ in range(2):  # two rounds of generalised Procrustes settle to well below a pixel
         c, t, _ = fit_similarity(z, ref)
