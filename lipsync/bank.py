@@ -253,7 +253,10 @@ class Bank:
     line_names : tuple of str
         Control line names, in one order shared by every viseme's ``lines`` array.
     images : dict
-        Viseme name -> RGB ``uint8`` ``(H, W, 3)`` image.
+        Viseme name -> RGB ``uint8`` ``(H, W, 3)`` image; or, when any image of the bank has
+        transparency, RGBA ``(H, W, 4)`` with straight alpha for every viseme (images without
+        an alpha channel get alpha 255). An RGBA file whose alpha is 255 everywhere loads as
+        RGB: an opaque bank is opaque however its files were saved (see :mod:`lipsync.alpha`).
     lines : dict
         Viseme name -> float64 ``(L, 2, 2)`` control lines in ``line_names`` order
         (curves already expanded into segments ``name#i``).
@@ -291,6 +294,19 @@ class Bank:
     def shape(self) -> Tuple[int, int]:
         """``(H, W)`` of every image."""
         return self.images[self.names[0]].shape[:2]  # type: ignore[return-value]
+
+    @property
+    def channels(self) -> int:
+        """3 for an opaque bank (RGB images), 4 for a bank with transparency (RGBA).
+
+        Examples
+        --------
+        >>> from lipsync._data import default_bank_dir
+        >>> Bank.load(default_bank_dir()).channels
+        3
+        """
+        img = self.images[self.names[0]]
+        return img.shape[2] if img.ndim == 3 else 1
 
     @property
     def yaml_path(self) -> Path:
@@ -472,10 +488,15 @@ def _read_image(path: Path, where: str, yaml_path: Path, line: Optional[int]) ->
     if img.dtype != np.uint8:
         # 16-bit PNGs: keep the high byte; the renderer works in 8 bits.
         img = (img >> 8).astype(np.uint8) if img.dtype == np.uint16 else img.astype(np.uint8)
+    if img.ndim == 3 and img.shape[2] == 2:  # grey + alpha
+        img = np.dstack([cv2.cvtColor(np.ascontiguousarray(img[..., 0]), cv2.COLOR_GRAY2BGR), img[..., 1]])
     if img.ndim == 2:
         img = cv2.cvtColor(img, cv2.COLOR_GRAY2RGB)
     elif img.shape[2] == 4:
-        img = cv2.cvtColor(img, cv2.COLOR_BGRA2RGB)
+        # Transparency is kept (issue 18); an alpha channel that is 255 everywhere is no
+        # transparency, and such a file loads as RGB like any opaque image.
+        opaque = cv2.minMaxLoc(np.ascontiguousarray(img[..., 3]))[0] == 255
+        img = cv2.cvtColor(img, cv2.COLOR_BGRA2RGB if opaque else cv2.COLOR_BGRA2RGBA)
     else:
         img = cv2.cvtColor(img, cv2.COLOR_BGR2RGB)
     return np.ascontiguousarray(img)
@@ -724,10 +745,15 @@ def _build(root, data, folder: Path, yaml_path: Path, image_cache) -> Bank:
             img = _read_image(real, f"viseme {v!r}", yaml_path, line)
         if shape is None:
             shape = img.shape
-        elif img.shape != shape:
+        elif img.shape[:2] != shape[:2]:
             fail(f"viseme {v!r}: image {rel!r} is {img.shape[1]}x{img.shape[0]} but "
                  f"{names[0]!r} is {shape[1]}x{shape[0]}; all images need one size", keys)
         images[v] = img
+    if any(img.shape[2] == 4 for img in images.values()):
+        # One layout for the whole bank: the opaque images get alpha 255.
+        import cv2
+
+        images = {v: img if img.shape[2] == 4 else cv2.cvtColor(img, cv2.COLOR_RGB2RGBA) for v, img in images.items()}
 
     h, w = shape[:2]  # type: ignore[index]
     for v in names:
