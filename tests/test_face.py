@@ -55,7 +55,7 @@ def _eye_dist(points):
     return float(M.eye_distance(points))
 
 
-@pytest.mark.parametrize("module", ["topology", "landmarks", "measure", "video", "track", "lines"])
+@pytest.mark.parametrize("module", ["topology", "landmarks", "measure", "video", "track", "lines", "compare"])
 def test_docstring_examples(module):
     mod = importlib.import_module(f"lipsync.face.{module}")
     result = doctest.testmod(mod, optionflags=doctest.ELLIPSIS | doctest.IGNORE_EXCEPTION_DETAIL)
@@ -344,3 +344,91 @@ def test_grid_alignment_reader():
     assert tl[0].start == pytest.approx(int(first[0]) / 25000)
     assert tl[0].label == "P"  # "place"
     assert "sp" not in {s.label.lower() for s in tl}
+
+
+def test_similarity_fit_recovers_a_known_transform():
+    from lipsync.face.compare import similarity_from_points
+
+    rng = np.random.default_rng(3)
+    src = rng.uniform(0, 100, (12, 2))
+    m = _similarity(21.0, 1.4, (7.0, -3.0), (50.0, 50.0))
+    got = similarity_from_points(src, src @ m[:, :2].T + m[:, 2])
+    assert np.allclose(got, m, atol=1e-9)
+
+
+def test_registration_undoes_a_head_movement(mesh, frames):
+    from lipsync.face.compare import mouth_box, psnr, register
+
+    img = frames["lwae8n"][20]
+    m = _similarity(6.0, 1.05, (5.0, -4.0), (180.0, 144.0))
+    moved = cv2.warpAffine(img, m, (360, 288), borderMode=cv2.BORDER_REPLICATE)
+    p, q = mesh.find(img), mesh.find(moved)
+    back, mat, residual = register(moved, q, p)
+    inverse = cv2.invertAffineTransform(m)
+    # the fitted transform is the inverse of the known one (within the mesh's precision)
+    corners = np.array([[120.0, 100.0], [240.0, 100.0], [180.0, 230.0]])
+    assert np.abs((corners @ mat[:, :2].T + mat[:, 2]) - (corners @ inverse[:, :2].T + inverse[:, 2])).max() < 1.5
+    assert residual < 0.02
+    box = mouth_box(p, img.shape[:2])
+    assert psnr(img, back, box) > psnr(img, moved, box) + 6
+
+
+def _plain_ssim(x, y):
+    # Wang et al.'s SSIM written out pixel by pixel with the 11-tap Gaussian window
+    g = np.exp(-((np.arange(11) - 5) ** 2) / (2 * 1.5 ** 2))
+    g = np.outer(g, g) / np.outer(g, g).sum()
+    c1, c2 = (0.01 * 255) ** 2, (0.03 * 255) ** 2
+    vals = []
+    for i in range(5, x.shape[0] - 5):
+        for j in range(5, x.shape[1] - 5):
+            a, b = x[i - 5:i + 6, j - 5:j + 6], y[i - 5:i + 6, j - 5:j + 6]
+            ma, mb = (g * a).sum(), (g * b).sum()
+            va, vb = (g * (a - ma) ** 2).sum(), (g * (b - mb) ** 2).sum()
+            cov = (g * (a - ma) * (b - mb)).sum()
+            vals.append((2 * ma * mb + c1) * (2 * cov + c2) / ((ma ** 2 + mb ** 2 + c1) * (va + vb + c2)))
+    return float(np.mean(vals))
+
+
+def test_ssim_and_psnr_against_plain_references():
+    from lipsync.face.compare import psnr, ssim
+
+    rng = np.random.default_rng(5)
+    x = rng.integers(0, 256, (30, 34)).astype(np.uint8)
+    y = np.clip(x.astype(int) + rng.integers(-30, 31, x.shape), 0, 255).astype(np.uint8)
+    assert ssim(x, y) == pytest.approx(_plain_ssim(x.astype(float), y.astype(float)), abs=1e-9)
+    assert ssim(x, x) == pytest.approx(1.0)
+    mse = ((x.astype(float) - y) ** 2).mean()
+    assert psnr(x, y) == pytest.approx(10 * np.log10(255 ** 2 / mse))
+    assert psnr(x, y, (2, 3, 12, 20)) == pytest.approx(
+        10 * np.log10(255 ** 2 / ((x[3:20, 2:12].astype(float) - y[3:20, 2:12]) ** 2).mean()))
+
+
+FACES = Path(__file__).parent / "data" / "faces"
+
+
+def _photo(name):
+    return cv2.cvtColor(cv2.imread(str(FACES / name)), cv2.COLOR_BGR2RGB)
+
+
+def test_a_face_unlike_the_dev_speaker(mesh):
+    # Eileen Collins' NASA portrait (public domain): a woman, smiling with her teeth showing.
+    # Mouth corners marked by hand on the picture (8x zoom): (128.8, 110.0) and (168.8, 111.9).
+    pts = mesh.find(_photo("astronaut.jpg"))
+    d = _eye_dist(pts)
+    assert np.linalg.norm(pts[61, :2] - [128.8, 110.0]) < 0.1 * d
+    assert np.linalg.norm(pts[291, :2] - [168.8, 111.9]) < 0.1 * d
+    assert M.lip_opening(pts) > 0.1  # the lips are apart
+    from lipsync.face.lines import SYMMETRIC_BELOW, TURNED_ABOVE, face_asymmetry
+
+    assert SYMMETRIC_BELOW < face_asymmetry([pts]) < TURNED_ABOVE
+
+
+def test_a_face_in_profile_is_found_but_warned_about(tmp_path):
+    # A man filming in profile (CC0): the mesh is frontal, so lines on a profile are poor
+    from lipsync.banks.init import init_bank
+
+    for v in "XA":
+        cv2.imwrite(str(tmp_path / f"{v}.png"), cv2.imread(str(FACES / "camera.jpg")))
+    with pytest.warns(FaceWarning, match="turned away from the camera"):
+        r = init_bank(tmp_path)
+    assert set(r.lines.values()) == {"face"}

@@ -8,7 +8,9 @@ The room's parts, each depending only on those above it:
 * :mod:`~lipsync.face.measure` — lip opening, mouth width, eye opening ... in eye distances;
 * :mod:`~lipsync.face.video` — frames of any video ffmpeg reads;
 * :mod:`~lipsync.face.track` — the face followed through a video, smoothed without lag;
-* :mod:`~lipsync.face.lines` — the template that turns a mesh into a bank's control lines.
+* :mod:`~lipsync.face.lines` — the template that turns a mesh into a bank's control lines;
+* :mod:`~lipsync.face.compare` — two pictures of a face registered by the still points, and
+  the mouth region's PSNR and SSIM (what real-footage measurements use).
 
 Examples
 --------
