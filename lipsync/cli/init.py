@@ -32,6 +32,9 @@ def add_parser(sub) -> None:
     g.add_argument("--at", default=None, metavar="X,Y", help="body pixel where the mouth image's centre goes")
     g.add_argument("--scale", type=float, default=1.0, metavar="S", help="mouth size on the body (default: 1)")
     p.add_argument("--force", action="store_true", help="replace an existing bank.yaml")
+    from ._init_video import add_video_options
+
+    add_video_options(p)
     p.set_defaults(func=run)
 
 
@@ -63,6 +66,10 @@ def _body_in_folder(folder: Path, body: Path):
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.video:
+        from ._init_video import run_video
+
+        return run_video(args)
     from ..banks.init import init_bank, parse_face_box
     from ..banks.names import parse_names_option
     from ..composite import parse_at
