@@ -229,7 +229,7 @@ def render_clip(timeline, output: PathLike, *, bank=None, audio: Optional[PathLi
     from ._data import default_bank_dir
     from .animator import Animator
     from .bank import Bank
-    from .composite import Compositor, load_background
+    from .composite import Compositor
     from .encode import ENCODERS, format_for, open_writer
     from .errors import InputError
     from .preprocess import all_pairs, preprocess
@@ -306,3 +306,75 @@ def render_clip(timeline, output: PathLike, *, bank=None, audio: Optional[PathLi
     t2 = time.perf_counter()
     return ClipReport(output=str(output), frames=len(anim), fps=float(fps), size=(w, h), method=method,
                       seconds_setup=t1 - t0, seconds_render=t2 - t1)
+
+
+# --------------------------------------------------------------------------- options
+
+def load_background(spec: str):
+    """``--background``: a colour (``white``, ``#rrggbb``, ``r,g,b``) or an image file.
+
+    Examples
+    --------
+    >>> load_background("#00ff00")
+    (0, 255, 0)
+    """
+    from .alpha import parse_colour
+    from .errors import InputError
+
+    colour = parse_colour(spec)
+    if colour is not None:
+        return colour
+    if not os.path.isfile(spec):
+        raise InputError("--background is neither a colour (a name, #rrggbb or r,g,b) nor an image file",
+                         path=spec)
+    from pathlib import Path
+
+    from .bank import read_image
+
+    return read_image(Path(spec))
+
+
+def composite_from_options(bank_composite, *, over=None, at=None, scale: Optional[float] = None):
+    """The composite ``lipsync render --over IMAGE --at X,Y --scale S`` asks for: each option
+    replaces that part of the bank's own ``composite:`` (if it has one).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from lipsync.composite import Composite
+    >>> body = np.zeros((50, 50, 3), np.uint8)
+    >>> composite_from_options(Composite(body, (10.0, 10.0)), at="20,30").at
+    (20.0, 30.0)
+    >>> composite_from_options(None) is None
+    True
+    """
+    from pathlib import Path
+
+    from .composite import Composite, check_placement, parse_at
+    from .errors import InputError
+
+    if over is None and at is None and scale is None:
+        return bank_composite
+    if over is None and bank_composite is None:
+        raise InputError("--at and --scale place the mouth on a body: give the body image with --over IMAGE "
+                         "(or a composite: block in bank.yaml)")
+    xy = parse_at(at) if isinstance(at, str) else at
+    if over is not None:
+        from .bank import read_image
+
+        path = Path(over)
+        if not path.is_file():
+            raise InputError("--over: body image not found", path=path)
+        image = read_image(path)
+        if xy is None:
+            if bank_composite is None:
+                raise InputError("--over needs --at X,Y: the body pixel where the mouth's centre goes", path=path)
+            xy = bank_composite.at
+        c = Composite(image, (float(xy[0]), float(xy[1])), 1.0 if scale is None and bank_composite is None
+                      else (scale if scale is not None else bank_composite.scale), path)
+    else:
+        c = bank_composite.replace(at=None if xy is None else (float(xy[0]), float(xy[1])), scale=scale)
+    problem = check_placement(c.image.shape, c.at, c.scale)
+    if problem:
+        raise InputError(f"--over/--at/--scale: {problem}", path=c.path)
+    return c

@@ -34,7 +34,6 @@ Examples
 from __future__ import annotations
 
 import math
-import os
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Optional, Sequence, Tuple, Union
@@ -42,11 +41,10 @@ from typing import Optional, Sequence, Tuple, Union
 import cv2
 import numpy as np
 
-from .alpha import flatten, has_alpha, over, parse_colour, resize_rgba
+from .alpha import flatten, has_alpha, over, resize_rgba
 from .errors import InputError
 
-__all__ = ["Composite", "Compositor", "DEFAULT_BACKGROUND", "MAX_SCALE", "parse_at", "load_background",
-           "composite_from_options"]
+__all__ = ["Composite", "Compositor", "DEFAULT_BACKGROUND", "MAX_SCALE", "parse_at", "check_placement"]
 
 #: What transparency is flattened onto when the output has no alpha and nothing else was
 #: asked for: white, the paper colour most drawn characters are made on (and what a
@@ -121,65 +119,6 @@ def parse_at(text: str) -> Tuple[float, float]:
     if not (math.isfinite(x) and math.isfinite(y)):
         raise InputError(f"--at must be finite numbers, got {text!r}")
     return x, y
-
-
-def load_background(spec: str) -> Background:
-    """``--background``: a colour (``white``, ``#rrggbb``, ``r,g,b``) or an image file.
-
-    Examples
-    --------
-    >>> load_background("#00ff00")
-    (0, 255, 0)
-    """
-    colour = parse_colour(spec)
-    if colour is not None:
-        return colour
-    if not os.path.isfile(spec):
-        raise InputError("--background is neither a colour (a name, #rrggbb or r,g,b) nor an image file",
-                         path=spec)
-    from .bank import read_image
-
-    return read_image(Path(spec))
-
-
-def composite_from_options(bank_composite: Optional[Composite], *, over=None, at=None,
-                           scale: Optional[float] = None) -> Optional[Composite]:
-    """The composite ``lipsync render --over IMAGE --at X,Y --scale S`` asks for: each option
-    replaces that part of the bank's own ``composite:`` (if it has one).
-
-    Examples
-    --------
-    >>> body = np.zeros((50, 50, 3), np.uint8)
-    >>> composite_from_options(Composite(body, (10.0, 10.0)), at="20,30").at
-    (20.0, 30.0)
-    >>> composite_from_options(None) is None
-    True
-    """
-    if over is None and at is None and scale is None:
-        return bank_composite
-    if over is None and bank_composite is None:
-        raise InputError("--at and --scale place the mouth on a body: give the body image with --over IMAGE "
-                         "(or a composite: block in bank.yaml)")
-    xy = parse_at(at) if isinstance(at, str) else at
-    if over is not None:
-        from .bank import read_image
-
-        path = Path(over)
-        if not path.is_file():
-            raise InputError("--over: body image not found", path=path)
-        image = read_image(path)
-        if xy is None:
-            if bank_composite is None:
-                raise InputError("--over needs --at X,Y: the body pixel where the mouth's centre goes", path=path)
-            xy = bank_composite.at
-        c = Composite(image, (float(xy[0]), float(xy[1])), 1.0 if scale is None and bank_composite is None
-                      else (scale if scale is not None else bank_composite.scale), path)
-    else:
-        c = bank_composite.replace(at=None if xy is None else (float(xy[0]), float(xy[1])), scale=scale)
-    problem = check_placement(c.image.shape, c.at, c.scale)
-    if problem:
-        raise InputError(f"--over/--at/--scale: {problem}", path=c.path)
-    return c
 
 
 class Compositor:

@@ -53,8 +53,7 @@ def add_parser(sub) -> None:
 def run(args: argparse.Namespace) -> int:
     from .._data import default_bank_dir
     from ..bank import Bank
-    from ..clip import render_clip
-    from ..composite import composite_from_options, load_background
+    from ..clip import composite_from_options, load_background, render_clip
     from ..errors import InputError
 
     if args.mouth_only and (args.over or args.at or args.scale is not None):
