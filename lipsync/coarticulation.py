@@ -53,7 +53,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from .errors import InputError
-from .sequencer import FrameSpec, checked_frames, plan_segments
+from .frames import FrameSpec, base_track, checked_frames
 from .timeline import VISEME, Timeline
 from .timing import DEFAULT_CURVE, check_timing, is_model
 
@@ -381,8 +381,7 @@ def plan(visemes: Timeline, *, rest: str, closures: Iterable[str] = (), duration
     >>> plan(Timeline((Segment(0.1, 0.2, "A"), Segment(0.2, 0.21, "A")), kind="viseme"), rest="X", duration=0.3)
     [(0.0, 0.1, 'X'), (0.1, 0.21, 'A'), (0.21, 0.3, 'X')]
     """
-    return plan_segments(visemes, rest=rest, closures=closures, max_held_pause=0.0, min_segment=0.0,
-                         duration=duration, start=start)
+    return [(s.start, s.end, s.label) for s in base_track(visemes, rest=rest, duration=duration, start=start)]
 
 
 def _tail(x: np.ndarray) -> np.ndarray:
