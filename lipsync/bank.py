@@ -101,6 +101,8 @@ class _BankSpec(BaseModel):
     rest: str
     warp: WarpParams = WarpParams()
     symmetry: bool = False
+    # Refine the line flows with optical flow at preprocess time (lipsync.refine, issue 22).
+    refine: bool = True
     # How this subject's mouth moves when a render does not say (lipsync.timing): a curve
     # name or "dominance"; banks made from video set "dominance" (issue 21).
     timing: Optional[str] = None
@@ -323,6 +325,7 @@ class Bank:
     composite: Optional["Composite"] = field(default=None, repr=False)
     timing: Optional[str] = None
     coarticulation: Optional[DominanceParams] = field(default=None, repr=False)
+    refine: bool = True
 
     @property
     def feature_names(self) -> Tuple[str, ...]:
@@ -848,5 +851,5 @@ def _build(root, data, folder: Path, yaml_path: Path, image_cache) -> Bank:
 
     return Bank(path=folder, name=spec.name, rest=spec.rest, warp=spec.warp, symmetry=spec.symmetry,
                 names=names, line_names=tuple(line_names), images=images, lines=lines, features=features,
-                composite=composite, timing=spec.timing,
+                composite=composite, timing=spec.timing, refine=spec.refine,
                 coarticulation=spec.coarticulation.apply() if spec.coarticulation is not None else None)

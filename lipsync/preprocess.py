@@ -27,8 +27,8 @@ from typing import List, Optional, Tuple
 
 import numpy as np
 
-from .bank import Bank, WarpParams
-from .flows import pair_flows
+from .bank import Bank
+from .flows import bank_pair_flows
 from .normalise import NormalisedBank, normalise
 from .store import FlowStore
 
@@ -76,13 +76,10 @@ def all_pairs(names) -> List[Tuple[str, str]]:
     return [(names[i], names[j]) for i in range(len(names)) for j in range(i + 1, len(names))]
 
 
-def _compute_pair(root: str, key: str, shape: Tuple[int, int], lines_a: np.ndarray, lines_b: np.ndarray,
-                  warp: Tuple[float, float, float], line_names: Tuple[str, ...], axis: Optional[float],
-                  names: Tuple[str, str]) -> str:
+def _compute_pair(root: str, key: str, nb: NormalisedBank, a: str, b: str) -> str:
     # One task (a thread here, a dask worker in lipsync.batch): both fields, the entry written atomically.
-    params = WarpParams(a=warp[0], b=warp[1], p=warp[2])
-    forward, backward = pair_flows(shape, lines_a, lines_b, params, line_names=line_names, axis=axis)
-    FlowStore(root).put_pair(key, forward, backward, axis=axis, names=names)
+    forward, backward, axis = bank_pair_flows(nb, a, b)
+    FlowStore(root).put_pair(key, forward, backward, axis=axis, names=(a, b))
     return key
 
 
@@ -132,8 +129,7 @@ def preprocess(bank: Bank, *, store: Optional[FlowStore] = None, jobs: Optional[
     for a, b in pairs:
         key = store.pair_key(bank, a, b, nb.axis)
         if store.load_pair(key, bank.shape) is None:
-            todo.append((str(store.root), key, bank.shape, nb.lines[a], nb.lines[b],
-                         (bank.warp.a, bank.warp.b, bank.warp.p), bank.line_names, nb.axis, (a, b)))
+            todo.append((str(store.root), key, nb, a, b))
     jobs = max(1, int(jobs if jobs is not None else (os.cpu_count() or 1)))
     bar = tqdm(total=len(todo), desc=f"flows {bank.name}", unit="pair", disable=quiet or not todo,
                leave=False)

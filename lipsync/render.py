@@ -53,7 +53,7 @@ import numpy as np
 from .alpha import blend as blend_rgba, premultiply, unpremultiply
 from .bank import Bank
 from .errors import InputError
-from .flows import pair_flows
+from .flows import bank_pair_flows
 from .normalise import NormalisedBank, normalise
 from .registry import Registry
 from .store import Crop, FlowStore, InverseTables, StoredField, pack_pair, union_box, unpack_pair
@@ -446,16 +446,15 @@ class Renderer:
         nb = self.nb
         i, j = self.bank.names.index(a), self.bank.names.index(b)
         first, second = (a, b) if i <= j else (b, a)
-        fwd, bwd = pair_flows(self.shape, nb.lines[first], nb.lines[second], self.bank.warp,
-                              line_names=self.bank.line_names, axis=nb.axis)
+        fwd, bwd, axis = bank_pair_flows(nb, first, second)
         key = self.store.pair_key(self.bank, first, second, nb.axis)
         try:
-            self.store.put_pair(key, fwd, bwd, axis=nb.axis, names=(first, second))
+            self.store.put_pair(key, fwd, bwd, axis=axis, names=(first, second))
             got = self.store.load_pair(key, self.shape)
         except OSError:
             got = None  # unwritable store: the same entry, kept in memory
         if got is None:
-            meta, arrays = pack_pair(fwd, bwd, axis=nb.axis)
+            meta, arrays = pack_pair(fwd, bwd, axis=axis)
             got = unpack_pair(meta, arrays, self.shape)
         return got if (first, second) == (a, b) else (got[1], got[0])
 

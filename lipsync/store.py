@@ -260,6 +260,7 @@ class FlowStore:
     def pair_key(self, bank: Bank, a: str, b: str, axis: Optional[float]) -> str:
         """The key of the entry for the ordered pair (a, b)."""
         from .flows import SOLVE_STEP, TABLE_ITERATIONS, TABLE_STEPS
+        from .refine import REFINE_VERSION
 
         w = bank.warp
         return self._key([
@@ -271,6 +272,9 @@ class FlowStore:
             np.ascontiguousarray(bank.lines[a]).tobytes(), np.ascontiguousarray(bank.lines[b]).tobytes(),
             "\0".join(bank.line_names).encode(),
             json.dumps([w.a, w.b, w.p, bank.symmetry, axis]).encode(),
+            # refined flows (lipsync.refine) are other fields: their own keys, and a new
+            # version of the refinement misses the old ones
+            *([f"refine-v{REFINE_VERSION}".encode()] if bank.refine else []),
         ])
 
     def image_key(self, bank: Bank, v: str, axis: Optional[float]) -> str:

@@ -109,8 +109,7 @@ def pair_task(pack: BankPack, a: str, b: str, cache: Optional[str] = None) -> Tu
     # every store checks each entry it reads, so a damaged one becomes a miss wherever it
     # lands and is recomputed there. Checking here too would cost a decode per pair.
     if not store.pair_path(key).is_file():
-        _compute_pair(str(store.root), key, bank.shape, nb.lines[a], nb.lines[b],
-                      (bank.warp.a, bank.warp.b, bank.warp.p), bank.line_names, nb.axis, (a, b))
+        _compute_pair(str(store.root), key, nb, a, b)
     with local.lock:
         local.installed.add(key)
     return key, store.pair_path(key).read_bytes()

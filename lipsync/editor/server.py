@@ -197,7 +197,7 @@ class FlowWorker:
         return True
 
     def _run(self) -> None:
-        from ..flows import pair_flows
+        from ..flows import bank_pair_flows
 
         while True:
             with self._cond:
@@ -211,9 +211,8 @@ class FlowWorker:
             try:
                 bank, nb = draft.bank, draft.nb
                 key = draft.pair_key(a, b)
-                fwd, bwd = pair_flows(bank.shape, nb.lines[a], nb.lines[b], bank.warp,
-                                      line_names=bank.line_names, axis=nb.axis)
-                draft.store.put_pair(key, fwd, bwd, axis=nb.axis, names=(a, b))
+                fwd, bwd, axis = bank_pair_flows(nb, a, b)
+                draft.store.put_pair(key, fwd, bwd, axis=axis, names=(a, b))
                 with self._cond:
                     self.written.add(key)
             except OSError:
