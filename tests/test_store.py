@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from lipsync.bank import Bank
-from lipsync.flows import pair_flows
+from lipsync.flows import bank_pair_flows
 from lipsync.normalise import normalise
 from lipsync.preprocess import all_pairs, preprocess
 from lipsync.render import Renderer
@@ -90,7 +90,8 @@ def test_stored_fields_match_computed_fields(bank_dir):
     store = FlowStore(bank_dir / "store")
     preprocess(bank, store=store, jobs=1, quiet=True)
     nb = normalise(bank)
-    fwd, bwd = pair_flows(bank.shape, nb.lines["A"], nb.lines["E"], bank.warp)
+    fwd, bwd, axis = bank_pair_flows(nb, "A", "E")  # the line flows, refined (the default)
+    assert axis == nb.axis is not None
     got_f, got_b = store.get_pair(bank, "A", "E")
     # the dead zone, then float16 rounding: the documented cost of compact storage
     for got, want in ((got_f, fwd), (got_b, bwd)):
