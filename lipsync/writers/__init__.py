@@ -35,6 +35,7 @@ from typing import Callable, FrozenSet, Iterable, List, Mapping, Optional, Seque
 from ..errors import InputError
 from ..registry import Registry
 from ..timeline import Segment, Timeline
+from ..timing import DEFAULT_CURVE
 
 PathLike = Union[str, "os.PathLike[str]"]
 
@@ -68,6 +69,12 @@ class CueOptions:
     closures : frozenset
         Visemes that must be shown however short (the map's closures): Moho keys them first
         when cues share a frame.
+    timing : str
+        The transition timing curve (formats holding frames: the atlas frames).
+    atlas : Atlas, optional
+        The sprite atlas whose cells the atlas frames name (:mod:`lipsync.atlas`).
+    output : str, optional
+        The file being written (formats that name other files relative to it).
     """
 
     duration: float
@@ -77,6 +84,9 @@ class CueOptions:
     sound_file: Optional[str] = None
     names: Mapping[str, str] = field(default_factory=dict)
     closures: FrozenSet[str] = frozenset()
+    timing: str = DEFAULT_CURVE
+    atlas: Optional[object] = None
+    output: Optional[str] = None
 
 
 @dataclass(frozen=True)
@@ -155,7 +165,8 @@ def format_for(path: PathLike) -> str:
 def write_cues(cues: Union[Timeline, Sequence[Cue]], path: PathLike, format: Optional[str] = None, *,
                rest: str = "X", fps: float = DEFAULT_FPS, tier: str = DEFAULT_TIER,
                sound_file: Optional[str] = None, names: Optional[Mapping[str, str]] = None,
-               closures: Iterable[str] = (), duration: Optional[float] = None) -> str:
+               closures: Iterable[str] = (), duration: Optional[float] = None, timing: str = DEFAULT_CURVE,
+               atlas=None) -> str:
     """Write a viseme track as mouth cues; returns the format name used.
 
     Parameters
@@ -180,6 +191,11 @@ def write_cues(cues: Union[Timeline, Sequence[Cue]], path: PathLike, format: Opt
         Visemes shown however short (closed lips); Moho gives them a key first.
     duration : float, optional
         End of the track (default: the timeline's duration).
+    timing : str
+        Transition timing curve (the atlas frames follow the sequencer's frames).
+    atlas : Atlas, optional
+        For ``atlas``: the sprite atlas (:func:`lipsync.atlas.load_atlas`) whose cells the
+        frames name.
 
     Returns
     -------
@@ -212,7 +228,8 @@ def write_cues(cues: Union[Timeline, Sequence[Cue]], path: PathLike, format: Opt
         raise InputError(f"frame rate must be a positive number, not {fps!r}")
     track, total = cue_track(cues, rest=rest, duration=duration)
     options = CueOptions(duration=total, rest=rest, fps=float(fps), tier=tier, sound_file=sound_file,
-                         names=dict(names or {}), closures=frozenset(closures))
+                         names=dict(names or {}), closures=frozenset(closures), timing=timing, atlas=atlas,
+                         output=os.fspath(path))
     text = writer.render(track, options)
     data = text.encode("utf-8")
     atomic_write_bytes(Path(os.fspath(path)), lambda fh: fh.write(data))
@@ -220,4 +237,4 @@ def write_cues(cues: Union[Timeline, Sequence[Cue]], path: PathLike, format: Opt
 
 
 # Each writer module registers itself; imported last because they import from this module.
-from . import rhubarb, moho, textgrid, audacity  # noqa: E402,F401  (registration order = --format choices)
+from . import rhubarb, moho, textgrid, audacity, atlas  # noqa: E402,F401  (registration order = --format choices)
