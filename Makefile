@@ -46,3 +46,4 @@ docs-images: $(STAMP)
 	$(BIN)/lipsync morph visemes/toon X D --frames 5 -o docs/strip.png
 	$(BIN)/lipsync preview visemes/toon -o docs/preview.png
 	$(BIN)/python -m lipsync.editor.browser visemes/toon docs/editor.png
+	$(BIN)/python tools/face_overlay.py docs/face-lines.jpg

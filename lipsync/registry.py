@@ -86,3 +86,10 @@ class Registry(Generic[T]):
 
     def items(self) -> List[Tuple[str, T]]:
         return list(self._entries.items())
+
+    def extensions(self) -> Dict[str, List[str]]:
+        """Each name's registered extensions (sorted), for names that have any."""
+        out: Dict[str, List[str]] = {}
+        for ext, key in sorted(self._extensions.items()):
+            out.setdefault(key, []).append(ext)
+        return out

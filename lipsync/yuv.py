@@ -1,6 +1,6 @@
 r"""RGB frames to planar YUV 4:2:0 (BT.709, limited range), the pixel format H.264 carries.
 
-:class:`lipsync.encode.Mp4Writer` converts every frame here and pipes ``yuv420p`` to
+:class:`lipsync.encode.mp4.Mp4Writer` converts every frame here and pipes ``yuv420p`` to
 ffmpeg instead of ``rgb24``: half the bytes through the pipe, and no swscale pass inside
 ffmpeg. swscale's exact path for this conversion (``accurate_rnd+full_chroma_int``, the
 only one that rounds correctly) cost 2.4 CPU-ms per 1280x720 frame (1.6 CPU-s of a 26.7 s

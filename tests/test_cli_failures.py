@@ -157,7 +157,7 @@ def test_output_is_an_existing_folder(bank, tmp_path):
 @pytest.mark.parametrize("fmt", ["mp4", "png"])
 def test_disk_full_mid_render(bank, tmp_path, monkeypatch, capsys, fmt):
     calls = {"n": 0}
-    real_write_all = encode._write_all
+    real_write_all = encode.base.write_all
 
     def filling_disk(stream, data):
         calls["n"] += 1
@@ -165,7 +165,7 @@ def test_disk_full_mid_render(bank, tmp_path, monkeypatch, capsys, fmt):
             raise OSError(errno.ENOSPC, "No space left on device")
         real_write_all(stream, data)
 
-    monkeypatch.setattr(encode, "_write_all", filling_disk)
+    monkeypatch.setattr(encode.base, "write_all", filling_disk)
     out_dir = tmp_path / "out"
     out_dir.mkdir()
     out = out_dir / ("talk.mp4" if fmt == "mp4" else "frames")

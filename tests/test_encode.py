@@ -207,11 +207,9 @@ def test_audio_starts_at_the_first_frame(tmp_path, announced):
 
 
 def test_announced_frame_count_runs_one_ffmpeg_and_is_enforced(tmp_path, monkeypatch):
-    from lipsync import encode as encode_mod
-
     started = []
-    real_popen = encode_mod._popen
-    monkeypatch.setattr(encode_mod, "_popen", lambda cmd, **kw: started.append(cmd) or real_popen(cmd, **kw))
+    real_popen = encode.ffmpeg.popen
+    monkeypatch.setattr(encode.ffmpeg, "popen", lambda cmd, **kw: started.append(cmd) or real_popen(cmd, **kw))
     wav = write_wav(tmp_path / "a.wav", 0.7)
     _, frames = colour_frames(20)
     with open_writer(tmp_path / "one.mp4", fps=FPS, size=(W, H), audio=wav, quiet=True, frames=20) as w:
@@ -305,7 +303,7 @@ def test_ffmpeg_failing_mid_stream_is_encode_error_and_leaves_nothing(tmp_path, 
     out_dir = tmp_path / "out"
     out_dir.mkdir()
     exe = fake_ffmpeg(tmp_path, 'head -c 20000 >/dev/null; echo "simulated encoder crash" >&2; exit 1')
-    monkeypatch.setattr(encode, "_ffmpeg_exe", lambda: exe)
+    monkeypatch.setattr(encode.ffmpeg, "ffmpeg_exe", lambda: exe)
     _, frames = colour_frames(n_frames)
     with pytest.raises(EncodeError) as err:
         with open_writer(out_dir / "clip.mp4", fps=FPS, size=(W, H), quiet=True) as w:
@@ -334,7 +332,7 @@ def test_ffmpeg_killed_mid_stream(tmp_path):
 
 def test_unwritable_output_folder_fails_before_any_work(tmp_path, monkeypatch):
     started = []
-    monkeypatch.setattr(encode, "_popen", lambda *a, **k: started.append(a))
+    monkeypatch.setattr(encode.ffmpeg, "popen", lambda *a, **k: started.append(a))
     with pytest.raises(FileNotFoundError) as err:
         open_writer(tmp_path / "no" / "such" / "clip.mp4", fps=FPS, size=(W, H))
     assert "does not exist" in str(err.value) and str(tmp_path / "no" / "such") in str(err.value)
@@ -369,7 +367,7 @@ def test_read_only_folder(tmp_path):
 
 @pytest.mark.parametrize("fmt", ["mp4", "png"])
 def test_disk_full_while_writing(tmp_path, monkeypatch, fmt):
-    real = encode._write_all
+    real = encode.base.write_all
     calls = []
 
     def filling_up(stream, data):
@@ -378,7 +376,7 @@ def test_disk_full_while_writing(tmp_path, monkeypatch, fmt):
             raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
         real(stream, data)
 
-    monkeypatch.setattr(encode, "_write_all", filling_up)
+    monkeypatch.setattr(encode.base, "write_all", filling_up)
     out = tmp_path / ("clip.mp4" if fmt == "mp4" else "seq")
     _, frames = colour_frames(10)
     with pytest.raises(OSError) as err:
@@ -394,7 +392,7 @@ def test_disk_full_reported_by_ffmpeg(tmp_path, monkeypatch):
     out_dir = tmp_path / "out"
     out_dir.mkdir()
     exe = fake_ffmpeg(tmp_path, 'cat >/dev/null; echo "av_interleaved_write_frame(): No space left on device" >&2; exit 1')
-    monkeypatch.setattr(encode, "_ffmpeg_exe", lambda: exe)
+    monkeypatch.setattr(encode.ffmpeg, "ffmpeg_exe", lambda: exe)
     with pytest.raises(OSError) as err:
         with open_writer(out_dir / "clip.mp4", fps=FPS, size=(W, H), quiet=True) as w:
             w.write(np.zeros((H, W, 3), np.uint8))
@@ -471,8 +469,12 @@ def test_probe_rejects_non_video(tmp_path):
 def test_docstring_examples_run():
     import doctest
 
-    result = doctest.testmod(encode, optionflags=doctest.ELLIPSIS)
-    assert result.attempted >= 7 and result.failed == 0
+    attempted = 0
+    for module in (encode, encode.base, encode.ffmpeg, encode.mp4, encode.png):
+        result = doctest.testmod(module, optionflags=doctest.ELLIPSIS)
+        assert result.failed == 0, module.__name__
+        attempted += result.attempted
+    assert attempted >= 9
 
 
 def test_high_frame_rate_with_audio_keeps_a_constant_rate(tmp_path):

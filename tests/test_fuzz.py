@@ -171,6 +171,7 @@ SEED_FILES: Dict[str, List[Path]] = {
     "elevenlabs": _files("tests/data/timelines/elevenlabs_*.json"),
     # Speech audio: only the short silent golden file, so mutants stay quick to decode.
     "audio": _files("tests/data/timelines/silence.wav"),
+    "grid": _files("tests/data/grid-s1/*.align"),
 }
 #: Known-bad golden inputs: good material for mutations of any format.
 ERROR_FILES = [p for p in _files("tests/data/timelines/error_*") if not p.name.endswith(".error")]
@@ -182,12 +183,12 @@ EXTENSIONS = {"textgrid": [".TextGrid", ".textgrid"], "gentle": [".json"], "rhub
               "rhubarb-json": [".json"], "rhubarb-xml": [".xml"], "moho": [".dat"],
               "pgo": [".pgo"], "timit": [".phn", ".PHN"], "audacity": [".txt", ".labels"],
               "polly": [".marks", ".jsonl"], "azure": [".json"], "whisper": [".json"], "elevenlabs": [".json"],
-              "audio": [".wav", ".flac", ".mp3", ".m4a", ".ogg"]}
+              "audio": [".wav", ".flac", ".mp3", ".m4a", ".ogg"], "grid": [".align"]}
 ALIASES = {"textgrid": ["praat", "mfa", "TextGrid"], "gentle": ["GENTLE"], "rhubarb-tsv": ["tsv"],
            "rhubarb-json": ["Rhubarb-JSON"], "rhubarb-xml": ["xml"], "moho": ["dat", "papagayo"],
            "pgo": ["papagayo-ng", "papagayo-project"], "timit": ["phn"], "audacity": ["labels"],
            "polly": ["speech-marks"], "azure": ["azure-visemes"], "whisper": ["words", "whisper.cpp"],
-           "elevenlabs": ["character-alignment"], "audio": ["AUDIO"]}
+           "elevenlabs": ["character-alignment"], "audio": ["AUDIO"], "grid": ["grid-align"]}
 ALL_EXTENSIONS = sorted({e for es in EXTENSIONS.values() for e in es}) + [".lab", ".bin", ".yaml", ""]
 
 

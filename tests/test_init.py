@@ -31,7 +31,7 @@ def blank(path, w, h, value=128):
 def test_toon_images_reproduce_the_toon(tmp_path, toon):
     for v in toon.names:
         shutil.copy(TOON / f"{v}.png", tmp_path / f"lisa_{v}.png")
-    r = init_bank(tmp_path)
+    r = init_bank(tmp_path, lines="template")
     assert (r.system, r.rest, r.layout, r.size) == ("rhubarb", "X", "face", (512, 512))
     bank = Bank.load(tmp_path)
     assert bank.names == tuple("ABCDEFGHX") and bank.line_names == toon.line_names
@@ -47,7 +47,7 @@ def test_half_size_images_get_half_size_lines(tmp_path, toon):
     for v in "AXD":
         img = cv2.imread(str(TOON / f"{v}.png"))
         cv2.imwrite(str(tmp_path / f"{v}.png"), cv2.resize(img, (256, 256), interpolation=cv2.INTER_AREA))
-    init_bank(tmp_path, layout="face")
+    init_bank(tmp_path, layout="face", lines="template")
     bank = Bank.load(tmp_path)
     for v in "AXD":
         # pixel centres: x' = (x + 0.5) / 2 - 0.5
@@ -186,3 +186,112 @@ def test_nine_images_to_a_video(tmp_path):
     info = probe(out)
     assert info["streams"] == [("video", "h264"), ("audio", "aac")]
     assert info["n_frames"] > 10 and abs(info["audio_duration"] - info["video_duration"]) < 0.1
+
+
+# --- face lines on photos (real GRID frames: tests/data/grid-s1, CC BY 4.0, see SOURCE.md there) ---
+
+GRID = __import__("pathlib").Path(__file__).parent / "data" / "grid-s1"
+
+
+@pytest.fixture(scope="module")
+def grid_frames():
+    from lipsync.face.video import read_video
+
+    frames = list(read_video(GRID / "lwae8n.mpg"))
+    # closed at rest after the sentence, rounded for "white", wide open in "eight", half open
+    return {"X": frames[50], "F": frames[16], "D": frames[29], "B": frames[19]}
+
+
+def _save(folder, images):
+    folder.mkdir(exist_ok=True)
+    for v, img in images.items():
+        cv2.imwrite(str(folder / f"{v}.png"), cv2.cvtColor(np.ascontiguousarray(img), cv2.COLOR_RGB2BGR))
+
+
+def test_photos_of_a_face_get_lines_from_the_face(tmp_path, grid_frames, capsys):
+    from lipsync.face.landmarks import FaceMesh
+    from lipsync.face.lines import FACE_TEMPLATE, FACE_WARP
+
+    _save(tmp_path, grid_frames)
+    assert main(["init", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    for v in grid_frames:
+        assert f"{v}.png: lines from face" in out
+    bank = Bank.load(tmp_path)
+    assert set(bank.feature_names) >= {f.name for f in FACE_TEMPLATE}
+    assert bank.warp == FACE_WARP
+    # a real, slightly turned head is not normalised to symmetry (it would visibly change)
+    assert bank.symmetry is False
+    mesh = FaceMesh()
+    for v, img in grid_frames.items():
+        pts = mesh.find(img)
+        lip = bank.features[v]["lip_inner_lower_l"].points
+        # the inner lower lip's line runs from the mouth corner to the middle, on the mesh's points
+        np.testing.assert_allclose(lip[0], pts[78, :2], atol=0.01)
+        np.testing.assert_allclose(lip[-1], pts[14, :2], atol=0.01)
+    # the open mouth's inner lips are apart, the closed ones together
+    gap = lambda v: np.linalg.norm(bank.features[v]["lip_inner_upper_l"].points[-1]  # noqa: E731
+                                   - bank.features[v]["lip_inner_lower_l"].points[-1])
+    assert gap("D") > 3 * gap("X")
+    assert main(["check", str(tmp_path)]) == 0
+
+
+def test_a_symmetric_face_gets_a_symmetric_bank(tmp_path, grid_frames):
+    from lipsync.face.landmarks import FaceMesh
+    from lipsync.face.lines import midline_axis
+    from lipsync.normalise import bank_axis
+
+    # each frame's left half mirrored onto its right: an exactly symmetric face
+    mesh = FaceMesh()
+    axis = int(round(midline_axis([mesh.find(grid_frames["X"])])))
+    sym = {}
+    for v, img in grid_frames.items():
+        s = img.copy()
+        s[:, axis + 1:2 * axis + 1] = img[:, axis - 1::-1][:, :img.shape[1] - axis - 1]
+        sym[v] = s
+    _save(tmp_path, sym)
+    r = init_bank(tmp_path)
+    assert set(r.lines.values()) == {"face"}
+    bank = Bank.load(tmp_path)
+    assert bank.symmetry is True
+    assert abs(bank_axis(bank) - axis) <= 1.0
+    assert main(["check", str(tmp_path)]) == 0
+
+
+def test_an_image_without_a_face_borrows_the_rest_visemes_face(tmp_path, grid_frames, capsys):
+    imgs = dict(grid_frames)
+    imgs["B"] = np.full_like(imgs["B"], 100)  # no face here
+    _save(tmp_path, imgs)
+    r = init_bank(tmp_path)
+    assert r.lines["B"] == "face of X.png (no face found in B.png)"
+    assert all(r.lines[v] == "face" for v in "XFD")
+    bank = Bank.load(tmp_path)
+    np.testing.assert_allclose(bank.lines["B"], bank.lines["X"])
+
+
+def test_lines_option_forces_a_source(tmp_path, grid_frames, capsys):
+    _save(tmp_path / "faces", grid_frames)
+    r = init_bank(tmp_path / "faces", lines="template")
+    assert set(r.lines.values()) == {"template toon"}
+    assert "upper_outer_l" in Bank.load(tmp_path / "faces").line_names
+    # no face anywhere: template by default, an error naming the images when forced
+    for v in "AX":
+        blank(tmp_path / "blank" / f"{v}.png" if (tmp_path / "blank").mkdir(exist_ok=True) is None else None, 400, 300)
+    assert set(init_bank(tmp_path / "blank").lines.values()) == {"template toon"}
+    assert main(["init", str(tmp_path / "blank"), "--lines", "face", "--force"]) == 2
+    err = capsys.readouterr().err
+    assert "no face found in any image (A.png, X.png)" in err and "--lines template" in err
+
+
+def test_drawn_faces_the_mesh_recognises_get_face_lines(tmp_path, toon):
+    # The toon is a drawing, but the face mesh finds its face: auto takes the face's lines
+    for v in "XAD":
+        shutil.copy(TOON / f"{v}.png", tmp_path / f"{v}.png")
+    r = init_bank(tmp_path)
+    assert set(r.lines.values()) == {"face"}
+    bank = Bank.load(tmp_path)
+    # the lips are where the toon's own lines put them (within a few pixels)
+    for v in "XAD":
+        ours = bank.features[v]["lip_outer_upper_l"].points
+        mid = toon.lines[v][toon.line_names.index("upper_bow_l")][1]
+        assert np.linalg.norm(ours[-1] - mid) < 12, v  # 0.1 of its eye distance

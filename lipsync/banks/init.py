@@ -20,11 +20,25 @@ Two layouts:
 
 ``auto`` (the default) picks ``mouth`` for images of at most :data:`SPRITE_MAX_SIDE`
 pixels a side without a face box, ``face`` otherwise.
+
+Where the lines come from (``lines``):
+
+* ``face`` — each image's own face: the face mesh (:mod:`lipsync.face`) is placed on every
+  image and :func:`lipsync.face.lines.face_features` turns it into lines on the lips, jaw,
+  eyes, brows, nose and the still parts of the face, so a photo of a face needs no hand
+  work. An image in which no face is found borrows the lines of the rest viseme's face (or
+  the first image with one), and the result says so: the editor's "Place from face" or a
+  drag puts them right. The bank gets ``symmetry: true`` only when the faces are symmetric
+  (:data:`lipsync.face.lines.SYMMETRIC_BELOW`): normalising a real face that is turned or
+  tilted would visibly change it.
+* ``template`` — the template bank's lines moved onto the images (the layouts above).
+* ``auto`` (the default) — ``face`` when a face is found in at least one image of the face
+  layout, else ``template`` (drawings without a recognisable face, mouth sprites).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Dict, List, Optional, Sequence, Tuple
 
@@ -49,6 +63,8 @@ def _toon_dir() -> Path:
 TEMPLATES.register("toon", _toon_dir)
 
 LAYOUTS = ("auto", "face", "mouth")
+#: Where the control lines come from (see the module docstring).
+LINE_SOURCES = ("auto", "face", "template")
 #: Rhubarb-style mouth sprites are ~100-250 px; a face that shows eyes, nose and mouth
 #: clearly enough to place lines on is larger.
 SPRITE_MAX_SIDE = 256
@@ -76,6 +92,9 @@ class InitResult:
     rest: str
     layout: str
     size: Tuple[int, int]  # (W, H)
+    #: viseme -> where its lines came from: "face", "template <name>", or "face of <image>
+    #: (no face found in <image>)" for an image that borrowed another's face.
+    lines: Dict[str, str] = field(default_factory=dict)
 
 
 def _images(folder: Path) -> List[Path]:
@@ -128,7 +147,7 @@ def parse_face_box(text: str) -> Tuple[float, float, float, float]:
 
 def init_bank(folder, *, template: str = "toon", names: Optional[Dict[str, str]] = None,
               face_box: Optional[Tuple[float, float, float, float]] = None, layout: str = "auto",
-              rest: Optional[str] = None, force: bool = False) -> InitResult:
+              rest: Optional[str] = None, force: bool = False, lines: str = "auto") -> InitResult:
     """Write ``folder/bank.yaml`` for the images in ``folder``; it passes ``lipsync check``.
 
     Parameters
@@ -147,6 +166,8 @@ def init_bank(folder, *, template: str = "toon", names: Optional[Dict[str, str]]
         The rest viseme (default: X, rest or sil, whichever the names give).
     force : bool
         Overwrite an existing bank.yaml.
+    lines : {"auto", "face", "template"}
+        Where the control lines come from (see the module docstring).
 
     Returns
     -------
@@ -156,7 +177,8 @@ def init_bank(folder, *, template: str = "toon", names: Optional[Dict[str, str]]
     ------
     InputError
         No images, unrecognised names, images of differing sizes, an existing bank.yaml
-        without ``force``, a face box outside the images.
+        without ``force``, a face box outside the images, ``lines="face"`` and no face in
+        any image.
 
     Examples
     --------
@@ -174,6 +196,8 @@ def init_bank(folder, *, template: str = "toon", names: Optional[Dict[str, str]]
         raise InputError("not a folder (give the folder that holds the viseme images)", path=folder)
     if layout not in LAYOUTS:
         raise InputError(f"unknown layout {layout!r}; one of: {', '.join(LAYOUTS)}")
+    if lines not in LINE_SOURCES:
+        raise InputError(f"unknown line source {lines!r}; one of: {', '.join(LINE_SOURCES)}")
     yaml_path = folder / "bank.yaml"
     if yaml_path.exists() and not force:
         raise InputError("bank.yaml exists already; use --force to replace it", path=yaml_path)
@@ -204,6 +228,21 @@ def init_bank(folder, *, template: str = "toon", names: Optional[Dict[str, str]]
     elif rest not in named:
         raise InputError(f"--rest {rest!r} is not among the visemes ({', '.join(visemes)})")
 
+    if layout == "auto":
+        layout = "mouth" if face_box is None and max(h, w) <= SPRITE_MAX_SIDE else "face"
+    if lines == "face" or (lines == "auto" and layout == "face"):
+        faced = _face_lines(folder, named, visemes, rest, images, forced=lines == "face")
+        if faced is not None:
+            doc, sources, symmetric = faced
+            header = [f"# Written by lipsync init: lines placed from each image's face "
+                      f"({'symmetric' if symmetric else 'not symmetric enough for symmetry: true'}); "
+                      f"adjust them with: lipsync edit {folder}"]
+            text = dump_bank(doc, header=header)
+            Bank.from_text(text, folder, images=images)
+            write_bank_text(yaml_path, text)
+            return InitResult(yaml_path=yaml_path, visemes={v: named[v].name for v in visemes}, system=system,
+                              rest=rest, layout="face", size=(w, h), lines=sources)
+
     if template in TEMPLATES:
         tdir = Path(TEMPLATES.get(template)())
     elif Path(template, "bank.yaml").is_file():
@@ -214,8 +253,6 @@ def init_bank(folder, *, template: str = "toon", names: Optional[Dict[str, str]]
     tbank = Bank.load(tdir)
     th, tw = tbank.shape
     default_shape = tbank.rest
-    if layout == "auto":
-        layout = "mouth" if face_box is None and max(h, w) <= SPRITE_MAX_SIDE else "face"
     tfeatures = [tbank.features[v] for v in tbank.names]
     if layout == "mouth":
         keep = _is_mouth
@@ -271,4 +308,105 @@ def init_bank(folder, *, template: str = "toon", names: Optional[Dict[str, str]]
     Bank.from_text(text, folder, images=images)  # refuse to write a bank that would not load
     write_bank_text(yaml_path, text)
     return InitResult(yaml_path=yaml_path, visemes={v: named[v].name for v in visemes}, system=system,
-                      rest=rest, layout=layout, size=(w, h))
+                      rest=rest, layout=layout, size=(w, h),
+                      lines={v: f"template {template}" for v in visemes})
+
+
+@dataclass(frozen=True)
+class FacePlacement:
+    """Face lines placed on a bank's images (:func:`place_face_lines`).
+
+    Attributes
+    ----------
+    features : dict
+        Viseme → {feature name → :class:`~lipsync.bank.Feature`}, the same names on every viseme.
+    sources : dict
+        Viseme → ``"face"``, or ``"face of <donor> (no face found in <image>)"``.
+    symmetric : bool
+        Whether the faces are symmetric enough for ``symmetry: true``.
+    """
+
+    features: Dict[str, Dict[str, Feature]]
+    sources: Dict[str, str]
+    symmetric: bool
+
+
+def place_face_lines(images: Dict[str, np.ndarray], rest: str, *, labels: Optional[Dict[str, str]] = None,
+                     mesh=None) -> Optional[FacePlacement]:
+    """Control lines from the face in each image; None when no image shows a face.
+
+    An image without a face borrows the face of the rest viseme (or of the first image with
+    one), so that every viseme has the same lines; :attr:`FacePlacement.sources` says which.
+
+    Parameters
+    ----------
+    images : dict
+        Viseme → RGB ``uint8`` image (all one size).
+    rest : str
+        The rest viseme (the preferred donor).
+    labels : dict, optional
+        Viseme → what to call its image in ``sources`` (default: the viseme's name).
+    mesh : lipsync.face.landmarks.FaceMesh, optional
+        Loaded models to reuse.
+
+    Returns
+    -------
+    FacePlacement or None
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> place_face_lines({"X": np.zeros((64, 64, 3), np.uint8)}, "X") is None
+    True
+    """
+    import warnings
+
+    from ..face.landmarks import FaceMesh, FaceWarning, NoFaceError
+    from ..face.lines import SYMMETRIC_BELOW, TURNED_ABOVE, face_asymmetry, face_features, midline_axis
+
+    mesh = mesh or FaceMesh()
+    labels = labels or {v: v for v in images}
+    found: Dict[str, np.ndarray] = {}
+    for v, img in images.items():
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", FaceWarning)
+            try:
+                found[v] = mesh.find(img, source=labels[v])
+            except NoFaceError:
+                continue
+        for w in caught:
+            warnings.warn(str(w.message), FaceWarning, stacklevel=2)
+    if not found:
+        return None
+    turned = [labels[v] for v, p in found.items() if face_asymmetry([p]) > TURNED_ABOVE]
+    if turned:
+        warnings.warn(f"{', '.join(turned)}: the face is turned away from the camera; lines placed on it "
+                      "will be poor on the far side (a frontal view works best)", FaceWarning, stacklevel=2)
+    donor = rest if rest in found else next(v for v in images if v in found)
+    points = {v: found.get(v, found[donor]) for v in images}
+    sources = {v: "face" if v in found else f"face of {labels[donor]} (no face found in {labels[v]})"
+               for v in images}
+    symmetric = face_asymmetry(list(found.values())) < SYMMETRIC_BELOW
+    axis = midline_axis(list(found.values())) if symmetric else None
+    h, w = next(iter(images.values())).shape[:2]
+    return FacePlacement(face_features(points, (h, w), axis=axis), sources, symmetric)
+
+
+def _face_lines(folder: Path, named: Dict[str, Path], visemes: List[str], rest: str,
+                images: Dict[str, np.ndarray], *, forced: bool):
+    """The bank document with face lines, or None when no image has a face (and not forced)."""
+    from ..face.lines import FACE_WARP
+
+    placed = place_face_lines({v: images[named[v].name] for v in visemes}, rest,
+                              labels={v: named[v].name for v in visemes})
+    if placed is None:
+        if forced:
+            raise InputError("no face found in any image (" + ", ".join(named[v].name for v in visemes)
+                             + "); --lines template starts from the template's lines instead", path=folder)
+        return None
+    doc = {"name": folder.resolve().name, "rest": rest,
+           "warp": {"a": FACE_WARP.a, "b": FACE_WARP.b, "p": FACE_WARP.p}, "symmetry": placed.symmetric,
+           "visemes": {v: {"image": named[v].name,
+                           "lines": {n: f.to_yaml_value() for n, f in placed.features[v].items()}}
+                       for v in visemes}}
+    return doc, placed.sources, placed.symmetric

@@ -249,6 +249,7 @@ class Editor:
         self.images = {self.doc["visemes"][v]["image"]: bank.images[v] for v in bank.names}
         self._digests: Dict[str, str] = {}
         self._lock = threading.Lock()
+        self._face_lock = threading.Lock()  # the face models are not thread-safe
         self._version = 0
         self._drafts: Dict[int, _Draft] = {}
         self.worker = FlowWorker()
@@ -308,6 +309,53 @@ class Editor:
             self.doc = doc
             self._saved = bank
         return self._set_draft(bank)
+
+    def place_from_face(self, doc, visemes) -> Tuple[dict, Dict[str, str], Optional[float]]:
+        """A copy of ``doc`` with lines placed from the faces in its images.
+
+        ``visemes`` is a list of viseme names or ``"all"``. All visemes get the face template's
+        lines (and its warp weights, and ``symmetry`` as the faces allow); a list replaces only
+        those visemes' lines, which needs the bank to have face lines already (every viseme has
+        the same line names). Returns the new document and, per viseme placed, where its lines
+        came from, and the mirror axis the new lines are normalised about (None without
+        symmetry). InputError when no image shows a face or the request does not fit the bank.
+        """
+        from ..banks.init import place_face_lines
+        from ..face.landmarks import FaceMesh
+        from ..face.lines import FACE_WARP
+
+        _, bank = self.validate(doc)
+        if visemes == "all":
+            chosen = list(bank.names)
+        elif isinstance(visemes, list) and visemes and all(isinstance(v, str) for v in visemes):
+            unknown = [v for v in visemes if v not in bank.names]
+            if unknown:
+                raise InputError(f"not visemes of this bank: {', '.join(map(str, unknown))}")
+            chosen = visemes
+        else:
+            raise InputError('"visemes" must be "all" or a list of viseme names')
+        with self._lock:
+            if getattr(self, "_mesh", None) is None:
+                self._mesh = FaceMesh()
+            mesh = self._mesh
+        labels = {v: doc["visemes"][v]["image"] for v in bank.names}
+        with self._face_lock:
+            placed = place_face_lines(dict(bank.images), bank.rest, labels=labels, mesh=mesh)
+        if placed is None:
+            raise InputError("no face found in any of the bank's images (" + ", ".join(labels.values()) + ")")
+        new = json.loads(json.dumps(doc))
+        if visemes == "all":
+            new["warp"] = {"a": FACE_WARP.a, "b": FACE_WARP.b, "p": FACE_WARP.p}
+            new["symmetry"] = placed.symmetric
+        else:
+            ours = list(doc["visemes"][chosen[0]]["lines"])
+            if ours != list(placed.features[chosen[0]]):
+                raise InputError("this bank's lines are not the face template's; place them from the face on "
+                                 "all visemes (its lines then become face lines everywhere)")
+        for v in chosen:
+            new["visemes"][v]["lines"] = {n: f.to_yaml_value() for n, f in placed.features[v].items()}
+        _, checked = self.validate(new)
+        return new, {v: placed.sources[v] for v in chosen}, normalise_axis(checked)
 
     def close(self) -> None:
         """Stop the worker and remove the flows of abandoned drafts (those it wrote that the
@@ -417,6 +465,17 @@ def make_app(editor: Editor, session: Session, *, max_body: int = MAX_BODY):
             return JSONResponse({"ok": False, "error": _error_json(exc)}, status_code=422)
         return JSONResponse({"ok": True, "version": d.version, "path": str(editor.yaml_path)})
 
+    async def face(request):
+        payload, err = await read_doc(request)
+        if err:
+            return err
+        try:
+            doc, sources, axis = await _in_thread(editor.place_from_face, payload["doc"],
+                                                  payload.get("visemes", "all"))
+        except InputError as exc:
+            return JSONResponse({"ok": False, "error": _error_json(exc)}, status_code=422)
+        return JSONResponse({"ok": True, "doc": doc, "sources": sources, "axis": axis})
+
     def preview(request):
         q = request.query_params
         d = editor.draft
@@ -455,6 +514,7 @@ def make_app(editor: Editor, session: Session, *, max_body: int = MAX_BODY):
         Route("/api/image/{name:path}", image),
         Route("/api/draft", draft, methods=["POST"]),
         Route("/api/save", save, methods=["POST"]),
+        Route("/api/face", face, methods=["POST"]),
         Route("/api/preview", preview),
         Route("/api/status", status),
         Mount("/static", app=StaticFiles(directory=STATIC)),

@@ -10,7 +10,8 @@ from __future__ import annotations
 import importlib
 
 # Audio comes last: its sniffing checks binary magic numbers no text format has.
-MODULES = ["textgrid", "papagayo", "gentle", "rhubarb", "polly", "azure", "words", "moho", "timit", "audacity", "audio"]
+MODULES = ["textgrid", "papagayo", "gentle", "rhubarb", "polly", "azure", "words", "moho", "timit", "audacity", "grid",
+           "audio"]
 
 _loaded = False
 

@@ -54,7 +54,19 @@ function colourMap() {
 const round1 = (x) => Math.round(x * 10) / 10;  // dragged points: 1/10 px is plenty
 
 // ---------------------------------------------------------------- undo / redo
-function snapshot() { return JSON.stringify(S.doc.visemes); }
+// Placing lines from the face also sets warp and symmetry: an undo step restores them too.
+function snapshot() {
+  return JSON.stringify({visemes: S.doc.visemes, warp: S.doc.warp, symmetry: S.doc.symmetry, axis: S.axis});
+}
+function restore(text) {
+  const s = JSON.parse(text);
+  S.doc.visemes = s.visemes;
+  for (const key of ["warp", "symmetry"]) {
+    if (s[key] === undefined) delete S.doc[key]; else S.doc[key] = s[key];
+  }
+  S.axis = s.axis === undefined ? null : s.axis;
+  showSymmetry();
+}
 function pushUndo() {
   S.undo.push(snapshot());
   if (S.undo.length > UNDO_LIMIT) S.undo.shift();
@@ -64,13 +76,13 @@ function pushUndo() {
 function undo() {
   if (!S.undo.length) return;
   S.redo.push(snapshot());
-  S.doc.visemes = JSON.parse(S.undo.pop());
+  restore(S.undo.pop());
   changed();
 }
 function redo() {
   if (!S.redo.length) return;
   S.undo.push(snapshot());
-  S.doc.visemes = JSON.parse(S.redo.pop());
+  restore(S.redo.pop());
   changed();
 }
 function updateButtons() {
@@ -367,6 +379,35 @@ function copyLines() {
   changed();
 }
 
+async function placeFromFace() {
+  const all = $("face-scope").value === "all";
+  const m = $("message");
+  m.textContent = "placing lines from the face...";
+  m.className = "";
+  const r = await api("/api/face", {method: "POST", headers: {"Content-Type": "application/json"},
+    body: JSON.stringify({doc: S.doc, visemes: all ? "all" : [S.current]})});
+  const body = await r.json();
+  if (!body.ok) {
+    m.textContent = "not placed: " + body.error.message.replace(/^.*?bank\.yaml(:\d+)?: /, "");
+    m.className = "bad";
+    return;
+  }
+  pushUndo();
+  S.doc = body.doc;
+  S.axis = body.axis;
+  showSymmetry();
+  const borrowed = Object.entries(body.sources).filter(([, src]) => src !== "face");
+  m.textContent = `lines placed from the face on ${Object.keys(body.sources).join(", ")}` +
+    (borrowed.length ? "; " + borrowed.map(([v, src]) => `${v}: ${src}`).join("; ") : "");
+  m.className = borrowed.length ? "bad" : "ok";
+  S.selected = null;
+  changed();
+}
+function showSymmetry() {
+  $("symmetry-note").textContent = S.doc.symmetry && S.axis !== null ?
+    `Symmetry is on: moving an _l line moves its _r partner (axis x = ${S.axis}).` : "";
+}
+
 // ---------------------------------------------------------------- server
 let draftTimer = null;
 function changed() {
@@ -509,8 +550,7 @@ async function start() {
   S.axis = info.doc.symmetry ? info.axis : null;
   S.version = info.version;
   $("path").textContent = info.path;
-  $("symmetry-note").textContent = info.doc.symmetry ?
-    `Symmetry is on: moving an _l line moves its _r partner (axis x = ${info.axis}).` : "";
+  showSymmetry();
   const [h, w] = S.shape;
   $("canvas-image").setAttribute("width", w);
   $("canvas-image").setAttribute("height", h);
@@ -536,6 +576,7 @@ async function start() {
   $("rename").onclick = renameLine;
   $("delete").onclick = deleteLine;
   $("copy").onclick = copyLines;
+  $("face").onclick = placeFromFace;
   $("play").onclick = play;
   $("from").onchange = $("to").onchange = refreshPreview;
   $("alpha").addEventListener("input", () => { $("alpha-value").textContent = (+$("alpha").value).toFixed(2); refreshPreview(); });
