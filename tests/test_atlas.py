@@ -30,6 +30,7 @@ ROOT = Path(__file__).parent.parent
 HELLO = ROOT / "samples" / "hello.phn"
 BALLOONS = ROOT / "samples" / "balloons.phn"
 N = 3  # in-betweens in the atlases below: cells at alpha 1/4, 1/2, 3/4
+N_ALL = 2  # in-betweens of the all-pairs atlas (81 cells: a 24 MB texture in memory, not 38)
 
 
 def read_rgba(path) -> np.ndarray:
@@ -55,7 +56,7 @@ def renderer(toon):
 @pytest.fixture(scope="module")
 def all_pairs(tmp_path_factory, toon):
     out = tmp_path_factory.mktemp("all") / "mouth.png"
-    assert main(["atlas", str(default_bank_dir()), "-o", str(out), "--pairs", "all", "-n", str(N), "-q"]) == 0
+    assert main(["atlas", str(default_bank_dir()), "-o", str(out), "--pairs", "all", "-n", str(N_ALL), "-q"]) == 0
     atlas = load_atlas(out.with_suffix(".json"))
     return atlas, read_rgba(out), read_rgba(out.with_name("mouth.base.png"))
 
@@ -99,12 +100,12 @@ def test_too_large_names_a_scale_that_fits():
 def test_every_cell_is_the_rendered_frame_of_its_pair_and_alpha(all_pairs, toon, renderer):
     atlas, texture, base = all_pairs
     names = list(toon.names)
-    assert atlas.visemes == tuple(names) and atlas.rest == "X" and atlas.inbetweens == N
+    assert atlas.visemes == tuple(names) and atlas.rest == "X" and atlas.inbetweens == N_ALL
     pairs = [(a, b) for i, a in enumerate(names) for b in names[i + 1:]]
-    assert len(atlas.cells) == len(names) + N * len(pairs)
+    assert len(atlas.cells) == len(names) + N_ALL * len(pairs)
     assert [(c.from_viseme, c.alpha) for c in atlas.cells[:len(names)]] == [(v, 0.0) for v in names]
     assert [(c.from_viseme, c.to_viseme, c.alpha) for c in atlas.cells[len(names):]] == [
-        (a, b, k / (N + 1)) for a, b in pairs for k in range(1, N + 1)]
+        (a, b, k / (N_ALL + 1)) for a, b in pairs for k in range(1, N_ALL + 1)]
     for i, c in enumerate(atlas.cells):
         frame = compose(atlas, texture, base, i)
         want = renderer.render(c.from_viseme, c.to_viseme, c.alpha)
@@ -112,7 +113,7 @@ def test_every_cell_is_the_rendered_frame_of_its_pair_and_alpha(all_pairs, toon,
         assert (frame[..., 3] == 255).all()  # an opaque bank: opaque cells and base together
 
 
-@pytest.mark.parametrize("cell", [0, 12, 40, 101])
+@pytest.mark.parametrize("cell", [0, 12, 40, 77])
 def test_cell_equals_lipsync_morph(all_pairs, tmp_path, cell):
     atlas, texture, base = all_pairs
     c = atlas.cells[cell]
@@ -126,10 +127,9 @@ def test_region_is_the_tight_box_of_what_changes(all_pairs, renderer):
     atlas, texture, base = all_pairs
     rx, ry, rw, rh = atlas.region
     rest = renderer.render("X", "X", 0.0).copy()
-    frames = [compose(atlas, texture, base, i)[..., :3] for i in range(len(atlas.cells))]
     differs = np.zeros(rest.shape[:2], bool)
-    for f in frames:
-        differs |= np.any(f != rest, axis=2)
+    for i in range(len(atlas.cells)):
+        differs |= np.any(compose(atlas, texture, base, i)[..., :3] != rest, axis=2)
     ys, xs = np.nonzero(differs)
     assert (xs.min(), ys.min(), xs.max() + 1 - xs.min(), ys.max() + 1 - ys.min()) == (rx, ry, rw, rh)
     # the base holds the rest of the frame and is clear inside the region
@@ -158,14 +158,14 @@ def test_padding_repeats_the_cell_edge_and_the_rest_is_clear(all_pairs):
 def test_scaled_atlas_cells_are_the_area_averaged_frames(tmp_path, all_pairs):
     full, texture, base = all_pairs
     out = tmp_path / "half.png"
-    assert main(["atlas", str(default_bank_dir()), "-o", str(out), "--scale", "0.5", "-n", "1", "-q"]) == 0
+    assert main(["atlas", str(default_bank_dir()), "-o", str(out), "--scale", "0.5", "-n", str(N_ALL), "-q"]) == 0
     half = load_atlas(out.with_suffix(".json"))
     small = read_rgba(out)
     assert half.scale == 0.5 and half.region == full.region and half.frame_size == (512, 512)
     rw, rh = full.region[2:]
-    # the same (from, to, alpha) at full scale: alpha 1/2 is cell k=2 of the N=3 atlas
+    # the same (from, to, alpha) at full scale (the same cells: the region is the same too)
     lookup = {(c.from_viseme, c.to_viseme, c.alpha): i for i, c in enumerate(full.cells)}
-    for c in half.cells[:12]:
+    for c in half.cells[:14]:
         x, y, w, h = full.cells[lookup[(c.from_viseme, c.to_viseme, c.alpha)]].rect
         want = cv2.resize(texture[y:y + h, x:x + w], (round(rw / 2), round(rh / 2)), interpolation=cv2.INTER_AREA)
         x, y, w, h = c.rect

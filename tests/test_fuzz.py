@@ -86,6 +86,16 @@ def _rss_mb() -> float:
 _RSS_START_MB = _rss_mb()
 
 
+@pytest.fixture(scope="module", autouse=True)
+def _rss_baseline():
+    """The peak before the first fuzz test, not at import: in a whole-suite run the tests
+    that run between collection and this module (rendering, browsers) raise the process's
+    peak by hundreds of MB, which is not growth while reading fuzz inputs."""
+    global _RSS_START_MB
+    _RSS_START_MB = _rss_mb()
+    yield
+
+
 @contextmanager
 def watchdog(what: str):
     """Fail a case that hangs: SIGALRM after HANG_S interrupts it with :class:`Hang`."""
