@@ -583,6 +583,135 @@ done:
     return result;
 }
 
+/* ---------------------------------------------------------------- Beier-Neely field */
+
+/* The displacement field of lipsync.warp (see its docstring for the algebra): per line,
+ * every quantity is a column part (c * x) plus a row part (c * y + c0), each computed in
+ * double and rounded to float before they are added. Columns go in blocks: a block's
+ * column parts (4 x lines x block floats) stay in cache while every row reuses them, and
+ * the pixel loop runs over contiguous floats, which GCC vectorises (the AVX2 copy 8 wide;
+ * no contraction into FMA: -std=c99 keeps each float operation rounded as written, the
+ * arithmetic of the numba copy). Runs without the GIL, so preprocessing computes pairs in
+ * threads. coef holds per line: sx sy s0 vx vy v0 half lenp dxx dxy dx0 dyx dyy dy0. */
+enum { BN_NCOEF = 14 };
+typedef struct {
+    const double *xs, *ys, *coef;
+    float *out;                     /* (h, w, 2) */
+    int w, h, lines, block;
+    float a, b;
+    float *col, *acc;               /* scratch: 4 * lines * block, 3 * block */
+} bn_t;
+
+/* One line's weighted displacement added to a block row's sums. The exponent is the same
+ * for every pixel: one loop per common case, each a straight vectorisable loop (no pow()). */
+static inline __attribute__((always_inline))
+void bn_line(int n, const float *restrict cs, const float *restrict cv, const float *restrict cx,
+             const float *restrict cy, float *restrict aw, float *restrict ax, float *restrict ay,
+             float rs, float rv, float rdx, float rdy, float half, float lenp, float a, float b)
+{
+#define LS_BN_LOOP(WEIGHT)                                              \
+    for (int c = 0; c < n; c++) {                                       \
+        float s = fabsf(cs[c] + rs) - half;                             \
+        s = s > 0.f ? s : 0.f;                                          \
+        const float v = cv[c] + rv;                                     \
+        const float d = sqrtf(s * s + v * v) + a;                       \
+        const float q = lenp / d;                                       \
+        const float wt = WEIGHT;                                        \
+        aw[c] += wt;                                                    \
+        ax[c] += (cx[c] + rdx) * wt;                                    \
+        ay[c] += (cy[c] + rdy) * wt;                                    \
+    }
+    if (b == 2.f) { LS_BN_LOOP(q * q) }
+    else if (b == 4.f) { LS_BN_LOOP((q * q) * (q * q)) }
+    else if (b == 1.f) { LS_BN_LOOP(q) }
+    else { LS_BN_LOOP(powf(q, b)) }
+#undef LS_BN_LOOP
+}
+
+static inline __attribute__((always_inline)) void bn_body(const bn_t *t)
+{
+    const int L = t->lines, B = t->block;
+    const float a = t->a, b = t->b;
+    float *acc_w = t->acc, *acc_x = t->acc + B, *acc_y = t->acc + 2 * B;
+    for (int c0 = 0; c0 < t->w; c0 += B) {
+        const int n = t->w - c0 < B ? t->w - c0 : B;
+        for (int i = 0; i < L; i++) {
+            const double *k = t->coef + (size_t)i * BN_NCOEF;
+            float *cs = t->col + ((size_t)0 * L + i) * B, *cv = t->col + ((size_t)1 * L + i) * B;
+            float *cx = t->col + ((size_t)2 * L + i) * B, *cy = t->col + ((size_t)3 * L + i) * B;
+            for (int c = 0; c < n; c++) {
+                const double x = t->xs[c0 + c];
+                cs[c] = (float)(k[0] * x);
+                cv[c] = (float)(k[3] * x);
+                cx[c] = (float)(k[8] * x);
+                cy[c] = (float)(k[11] * x);
+            }
+        }
+        for (int r = 0; r < t->h; r++) {
+            const double y = t->ys[r];
+            for (int c = 0; c < n; c++) { acc_w[c] = 0.f; acc_x[c] = 0.f; acc_y[c] = 0.f; }
+            for (int i = 0; i < L; i++) {
+                const double *k = t->coef + (size_t)i * BN_NCOEF;
+                const float rs = (float)(k[1] * y + k[2]), rv = (float)(k[4] * y + k[5]);
+                const float rdx = (float)(k[9] * y + k[10]), rdy = (float)(k[12] * y + k[13]);
+                const float half = (float)k[6], lenp = (float)k[7];
+                bn_line(n, t->col + ((size_t)0 * L + i) * B, t->col + ((size_t)1 * L + i) * B,
+                        t->col + ((size_t)2 * L + i) * B, t->col + ((size_t)3 * L + i) * B,
+                        acc_w, acc_x, acc_y, rs, rv, rdx, rdy, half, lenp, a, b);
+            }
+            float *o = t->out + ((size_t)r * t->w + c0) * 2;
+            for (int c = 0; c < n; c++) {
+                o[2 * c] = acc_x[c] / acc_w[c];
+                o[2 * c + 1] = acc_y[c] / acc_w[c];
+            }
+        }
+    }
+}
+
+#if LS_X86
+LS_AVX2_TARGET static void bn_avx2(const bn_t *t) { bn_body(t); }
+#endif
+static void bn_plain(const bn_t *t) { bn_body(t); }
+
+static PyObject *beier_neely_field(PyObject *self, PyObject *args)
+{
+    Py_buffer xs, ys, coef, out;
+    bn_t t;
+    memset(&t, 0, sizeof t);
+    int simd = 2;
+    if (!PyArg_ParseTuple(args, "y*y*y*w*iiiiff|i", &xs, &ys, &coef, &out, &t.w, &t.h, &t.lines, &t.block,
+                          &t.a, &t.b, &simd))
+        return NULL;
+    PyObject *result = NULL;
+    float *scratch = NULL;
+    if (t.w < 0 || t.h < 0 || t.lines < 1 || t.block < 1 || !(t.a > 0.f) || !(t.b > 0.f)) {
+        PyErr_SetString(PyExc_ValueError, "beier_neely_field: inconsistent arguments");
+        goto done;
+    }
+    if (check_buffer(&xs, (Py_ssize_t)t.w * 8, "xs") || check_buffer(&ys, (Py_ssize_t)t.h * 8, "ys")
+        || check_buffer(&coef, (Py_ssize_t)t.lines * BN_NCOEF * 8, "coef")
+        || check_buffer(&out, (Py_ssize_t)t.w * t.h * 2 * 4, "out"))
+        goto done;
+    scratch = malloc(((size_t)4 * t.lines + 3) * t.block * sizeof(float));
+    if (!scratch) { PyErr_NoMemory(); goto done; }
+    t.xs = xs.buf; t.ys = ys.buf; t.coef = coef.buf; t.out = out.buf;
+    t.col = scratch;
+    t.acc = scratch + (size_t)4 * t.lines * t.block;
+    Py_BEGIN_ALLOW_THREADS
+#if LS_X86
+    if (simd >= 1 && simd_level() >= 1) bn_avx2(&t);
+    else
+#endif
+        bn_plain(&t);
+    Py_END_ALLOW_THREADS
+    result = Py_None;
+    Py_INCREF(result);
+done:
+    free(scratch);
+    PyBuffer_Release(&xs); PyBuffer_Release(&ys); PyBuffer_Release(&coef); PyBuffer_Release(&out);
+    return result;
+}
+
 static PyObject *simd_available(PyObject *self, PyObject *noargs)
 {
     return PyLong_FromLong(simd_level());
@@ -595,11 +724,14 @@ static PyMethodDef methods[] = {
      "Render rows [ry0, ry1) x columns [rx0, rx1) of a flow frame into out (see lipsync.render)."},
     {"rgb_to_yuv420p", rgb_to_yuv420p, METH_VARARGS,
      "rgb_to_yuv420p(rgb, out, w, h, coefficients, yhalf, chalf, shift): see lipsync.yuv."},
+    {"beier_neely_field", beier_neely_field, METH_VARARGS,
+     "beier_neely_field(xs, ys, coef, out, w, h, lines, block, a, b, simd=2)\n"
+     "The Beier-Neely displacement at the pixels ys x xs into out (h, w, 2) float32 (see lipsync.warp)."},
     {"simd_available", simd_available, METH_NOARGS,
      "The widest path this CPU runs: 2 AVX-512, 1 AVX2, 0 neither (warp_blend's simd caps it)."},
     {NULL, NULL, 0, NULL}};
 
 static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_flowkernel",
-                                    "The flow renderer's compiled frame kernel (see lipsync.render) and yuv420p conversion (lipsync.yuv).", -1, methods};
+                                    "The flow renderer's compiled frame kernel (see lipsync.render), yuv420p conversion (lipsync.yuv) and the Beier-Neely field (lipsync.warp).", -1, methods};
 
 PyMODINIT_FUNC PyInit__flowkernel(void) { return PyModule_Create(&module); }

@@ -1,5 +1,5 @@
-"""The portable numba kernels: the fallback when lipsync._flowkernel is not built or the
-CPU lacks AVX2 (frame kernel, table combine), and for yuv420p conversion.
+"""The portable numba kernels: the fallback when lipsync._flowkernel is not built (the
+Beier-Neely field, yuv420p conversion) or the CPU lacks AVX2 (frame kernel, table combine).
 
 Imported only when used (numba's import and its on-disk cache load cost ~0.3 s, a fifth of
 a short `lipsync render`); compiled once and cached on disk. The same contracts as the
@@ -10,6 +10,72 @@ import numba as _nb
 import numpy as np
 
 from .yuv import _CHALF as _CHALF_INT, _COEFFICIENTS, _SHIFT, _YHALF as _YHALF_INT
+
+
+@_nb.njit(cache=True, nogil=True, fastmath=True, boundscheck=False)
+def beier_neely_field(xs, ys, coef, a, b, block, out):  # pragma: no cover - compiled
+    """out (h, w, 2) float32 = Beier-Neely displacement at the pixels ys x xs (lipsync.warp).
+
+    The compiled ``beier_neely_field`` (lipsync/_flowkernel.c) in numba: ``coef`` (L, 14)
+    float64 holds each line's affine coefficients in the order of
+    :data:`lipsync.warp._COEF_ORDER`; each quantity is a column part (``c * x``) plus a row
+    part (``c * y + c0``), each rounded to float32 before they are added; columns go in
+    blocks of ``block`` whose column parts stay in cache. Without the GIL, like the C copy.
+    """
+    n_lines = coef.shape[0]
+    w = xs.shape[0]
+    h = ys.shape[0]
+    col = np.empty((4, n_lines, block), np.float32)
+    acc_w = np.empty(block, np.float32)
+    acc_x = np.empty(block, np.float32)
+    acc_y = np.empty(block, np.float32)
+    af = np.float32(a)
+    bf = np.float32(b)
+    zero = np.float32(0.0)
+    for c0 in range(0, w, block):
+        n = min(block, w - c0)
+        for i in range(n_lines):
+            for c in range(n):
+                x = xs[c0 + c]
+                col[0, i, c] = np.float32(coef[i, 0] * x)
+                col[1, i, c] = np.float32(coef[i, 3] * x)
+                col[2, i, c] = np.float32(coef[i, 8] * x)
+                col[3, i, c] = np.float32(coef[i, 11] * x)
+        for r in range(h):
+            y = ys[r]
+            acc_w[:n] = zero
+            acc_x[:n] = zero
+            acc_y[:n] = zero
+            for i in range(n_lines):
+                rs = np.float32(coef[i, 1] * y + coef[i, 2])
+                rv = np.float32(coef[i, 4] * y + coef[i, 5])
+                rdx = np.float32(coef[i, 9] * y + coef[i, 10])
+                rdy = np.float32(coef[i, 12] * y + coef[i, 13])
+                half = np.float32(coef[i, 6])
+                lenp = np.float32(coef[i, 7])
+                for c in range(n):
+                    # distance beyond the segment's ends, max(|s| - |e|/2, 0), then hypot with v
+                    s = abs(col[0, i, c] + rs) - half
+                    s = max(s, zero)
+                    v = col[1, i, c] + rv
+                    d = np.sqrt(s * s + v * v) + af
+                    if bf == np.float32(2.0):      # the common exponents without pow()
+                        q = lenp / d
+                        wt = q * q
+                    elif bf == np.float32(4.0):
+                        q = lenp / d
+                        q = q * q
+                        wt = q * q
+                    elif bf == np.float32(1.0):
+                        wt = lenp / d
+                    else:
+                        wt = (lenp / d) ** bf
+                    acc_w[c] += wt
+                    acc_x[c] += (col[2, i, c] + rdx) * wt
+                    acc_y[c] += (col[3, i, c] + rdy) * wt
+            for c in range(n):
+                out[r, c0 + c, 0] = acc_x[c] / acc_w[c]
+                out[r, c0 + c, 1] = acc_y[c] / acc_w[c]
 
 
 @_nb.njit(cache=True, nogil=True)

@@ -3,19 +3,26 @@
 Each entry holds both flows and their inverse maps at t = k/4 (Newton's method, see
 :func:`lipsync.flows.inverse_tables`), so rendering a frame never solves anything.
 
-Pairs are independent, so they are computed by worker processes (one pair per task; a
-worker needs only the line sets, never the images, so tasks are tiny to send). Each worker
-writes its entry itself, atomically; an interrupted run leaves only whole entries behind,
-and the next run computes just what is missing.
+Pairs are independent, so they are computed in parallel by threads of the calling process
+(one pair per task). The work runs outside the GIL: the Beier-Neely field in a numba
+``nogil`` kernel (lipsync.warp), the inverse tables in OpenCV's remap and large numpy
+operations, the entry's CRC in zlib and its write in the OS. Threads, not worker processes:
+a library must work from any script, notebook or REPL, and a ``spawn`` process pool
+re-imports the caller's main module in every child, so a plain script without
+``if __name__ == "__main__":`` ran again in each worker and died with BrokenProcessPool
+(issue 19). Threads also cannot outlive their process. Measured on the toon's 36 pairs
+(one run, 2 cores): see the ``preprocess`` figure of ``python -m lipsync.bench``.
+
+Each task writes its entry itself, atomically; an interrupted run leaves only whole
+entries behind, and the next run computes just what is missing.
 """
 
 from __future__ import annotations
 
 import os
 import time
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures import ThreadPoolExecutor, as_completed
 from dataclasses import dataclass
-from multiprocessing import get_context
 from typing import List, Optional, Tuple
 
 import numpy as np
@@ -72,7 +79,7 @@ def all_pairs(names) -> List[Tuple[str, str]]:
 def _compute_pair(root: str, key: str, shape: Tuple[int, int], lines_a: np.ndarray, lines_b: np.ndarray,
                   warp: Tuple[float, float, float], line_names: Tuple[str, ...], axis: Optional[float],
                   names: Tuple[str, str]) -> str:
-    # Runs in a worker process: compute both fields and write the entry atomically.
+    # One task (a thread here, a dask worker in lipsync.batch): both fields, the entry written atomically.
     params = WarpParams(a=warp[0], b=warp[1], p=warp[2])
     forward, backward = pair_flows(shape, lines_a, lines_b, params, line_names=line_names, axis=axis)
     FlowStore(root).put_pair(key, forward, backward, axis=axis, names=names)
@@ -91,7 +98,7 @@ def preprocess(bank: Bank, *, store: Optional[FlowStore] = None, jobs: Optional[
     store : FlowStore, optional
         Where flows go; by default ``<bank>/.lipsync``.
     jobs : int, optional
-        Worker processes; default: all cores. 1 computes in this process.
+        Threads computing pairs; default: all cores. 1 computes in the calling thread.
     quiet : bool
         No progress bar.
     normalised : NormalisedBank, optional
@@ -136,14 +143,15 @@ def preprocess(bank: Bank, *, store: Optional[FlowStore] = None, jobs: Optional[
                 _compute_pair(*task)
                 bar.update(1)
         else:
-            # spawn, not fork: the parent may hold OpenCV's thread pool, which fork can deadlock.
-            with ProcessPoolExecutor(max_workers=min(jobs, len(todo)), mp_context=get_context("spawn")) as ex:
+            with ThreadPoolExecutor(max_workers=min(jobs, len(todo)), thread_name_prefix="lipsync-flows") as ex:
                 futures = [ex.submit(_compute_pair, *task) for task in todo]
                 try:
                     for fut in as_completed(futures):
                         fut.result()
                         bar.update(1)
                 except BaseException:
+                    # Ctrl-C or a failed pair: queued pairs are dropped; the running ones
+                    # finish their (atomic) writes before the pool shuts down.
                     for fut in futures:
                         fut.cancel()
                     raise

@@ -14,8 +14,14 @@ For a destination pixel X and a line pair (PQ in the destination, P'Q' in the so
 The kernel works on the displacement ``X' - X`` written as ``(P'-P) + u·(e'-e) + v·(n'-n)``
 (e = Q-P, n = perp(e)/|e|; primes for the source line). That form is exactly zero when a
 line does not move, so identical line sets give the identity map without rounding noise,
-and it is affine in (x, y): per line every quantity is a sum of a row vector and a column
-vector, which numpy evaluates with one broadcast add instead of per-pixel multiplies.
+and it is affine in (x, y): per line every quantity is a sum of a row part and a column
+part, so a pixel costs adds, one square root and one division per line.
+
+The per-pixel loop is compiled (``beier_neely_field`` in lipsync/_flowkernel.c, GCC's
+vectorised AVX2 copy where the CPU has it; numba's copy in lipsync._numba_kernels when the
+extension is not built): one pass over each block of pixels instead of numpy's ~15 passes
+per line, and without the GIL, so preprocessing computes pairs in threads of the calling
+process (no worker processes, which a library must not start; see lipsync.preprocess).
 """
 
 from __future__ import annotations
@@ -24,10 +30,17 @@ from typing import Optional, Tuple
 
 import numpy as np
 
-#: Pixels processed per chunk. 16 Ki float32 pixels is 64 KiB per temporary; the kernel
-#: keeps about ten of them alive, so a chunk stays in L2 cache (measured fastest between
-#: 8 Ki and 32 Ki on this kind of machine) and peak extra memory is ~1 MB at any size.
-CHUNK_PIXELS = 16384
+try:  # the compiled field kernel; numba's copy (lipsync._numba_kernels) when it is not built
+    from . import _flowkernel as _compiled
+except ImportError:  # pragma: no cover - depends on the install
+    _compiled = None
+
+#: Columns per block of the field kernel: the per-line column terms of a block (4 x lines x
+#: 64 float32, 42 KB for the toon's 41 lines) stay in cache while every row reuses them, at
+#: any image width. 16 to 512 measured within noise of each other on the toon.
+BLOCK_COLUMNS = 64
+#: Order of the per-line coefficients handed to the kernel (see _line_coefficients).
+_COEF_ORDER = ("sx", "sy", "s0", "vx", "vy", "v0", "half", "lenp", "dxx", "dxy", "dx0", "dyx", "dyy", "dy0")
 
 
 def _as_lines(lines, name: str) -> np.ndarray:
@@ -78,57 +91,9 @@ def _line_coefficients(dst: np.ndarray, src: np.ndarray, p: float):
                 lenp=length ** p, dxx=dxx, dxy=dxy, dx0=dx0, dyx=dyx, dyy=dyy, dy0=dy0)
 
 
-def _beier_neely_displacement(xs: np.ndarray, ys: np.ndarray, coef: dict, a: float, b: float,
-                              out: np.ndarray, scratch: Tuple[np.ndarray, ...]) -> None:
-    """Kernel: write the displacement for the grid ``ys × xs`` into ``out`` (h, w, 2).
-
-    ``xs`` (w,) and ``ys`` (h,) are pixel coordinates in float64; the per-pixel work is in
-    float32 on preallocated ``scratch`` buffers of shape (h, w).
-    """
-    s, v, w, acc_w, acc_x, acc_y, tmp = scratch
-    acc_w.fill(0.0)
-    acc_x.fill(0.0)
-    acc_y.fill(0.0)
-    for i in range(len(coef["sx"])):
-        # Row and column parts of each affine quantity, in float64 then cast: keeps the
-        # large offsets exact before the float32 per-pixel arithmetic.
-        np.add((coef["sx"][i] * xs)[None, :].astype(np.float32),
-               (coef["sy"][i] * ys + coef["s0"][i])[:, None].astype(np.float32), out=s)
-        np.add((coef["vx"][i] * xs)[None, :].astype(np.float32),
-               (coef["vy"][i] * ys + coef["v0"][i])[:, None].astype(np.float32), out=v)
-        # Distance beyond the segment's ends: max(|s| - |e|/2, 0); then hypot with v.
-        np.abs(s, out=s)
-        s -= np.float32(coef["half"][i])
-        np.maximum(s, 0.0, out=s)
-        s *= s
-        np.multiply(v, v, out=tmp)
-        s += tmp
-        np.sqrt(s, out=s)  # s is now dist
-        s += np.float32(a)
-        if b == 2.0:
-            s *= s
-            np.divide(np.float32(coef["lenp"][i] ** 2), s, out=w)
-        elif b == 1.0:
-            np.divide(np.float32(coef["lenp"][i]), s, out=w)
-        else:
-            np.divide(np.float32(coef["lenp"][i]), s, out=w)
-            np.power(w, np.float32(b), out=w)
-        acc_w += w
-        np.add((coef["dxx"][i] * xs)[None, :].astype(np.float32),
-               (coef["dxy"][i] * ys + coef["dx0"][i])[:, None].astype(np.float32), out=tmp)
-        tmp *= w
-        acc_x += tmp
-        np.add((coef["dyx"][i] * xs)[None, :].astype(np.float32),
-               (coef["dyy"][i] * ys + coef["dy0"][i])[:, None].astype(np.float32), out=tmp)
-        tmp *= w
-        acc_y += tmp
-    np.divide(acc_x, acc_w, out=out[..., 0])
-    np.divide(acc_y, acc_w, out=out[..., 1])
-
-
 def beier_neely_displacement(shape: Tuple[int, ...], *, dst_lines, src_lines, a: float = 1.0,
                              b: float = 2.0, p: float = 0.5,
-                             columns: Optional[Tuple[int, int]] = None) -> np.ndarray:
+                             columns: Optional[Tuple[int, int]] = None, kernel: Optional[str] = None) -> np.ndarray:
     """Displacement field ``X_src - X`` of the Beier–Neely warp, float32 ``(H, W, 2)``.
 
     Parameters
@@ -141,6 +106,10 @@ def beier_neely_displacement(shape: Tuple[int, ...], *, dst_lines, src_lines, a:
         Weight parameters: ``weight = (length**p / (a + dist))**b``.
     columns : (int, int), optional
         Compute only columns ``[c0, c1)``; the result then has width ``c1 - c0``.
+    kernel : {None, "plain", "numba"}, optional
+        Force a kernel (for tests and benchmarks): by default the compiled one (its AVX2
+        path where the CPU has it), ``plain`` its portable path, ``numba`` numba's copy.
+        All give the same floats up to rounding order (see tests/test_warp.py).
 
     Returns
     -------
@@ -169,14 +138,16 @@ def beier_neely_displacement(shape: Tuple[int, ...], *, dst_lines, src_lines, a:
         out.fill(0.0)
         return out
     coef = _line_coefficients(dst, src, p)
+    table = np.ascontiguousarray(np.stack([coef[k] for k in _COEF_ORDER], axis=1), dtype=np.float64)
     xs = np.arange(c0, c1, dtype=np.float64)
-    rows = max(1, CHUNK_PIXELS // max(width, 1))
-    scratch_full = tuple(np.empty((rows, width), np.float32) for _ in range(7))
-    for r0 in range(0, h, rows):
-        r1 = min(h, r0 + rows)
-        scratch = scratch_full if r1 - r0 == rows else tuple(s[: r1 - r0] for s in scratch_full)
-        ys = np.arange(r0, r1, dtype=np.float64)
-        _beier_neely_displacement(xs, ys, coef, float(a), float(b), out[r0:r1], scratch)
+    ys = np.arange(h, dtype=np.float64)
+    if _compiled is not None and kernel != "numba":
+        _compiled.beier_neely_field(xs, ys, table, out, width, h, len(table), int(BLOCK_COLUMNS),
+                                    float(a), float(b), 0 if kernel == "plain" else 2)
+    else:
+        from ._numba_kernels import beier_neely_field  # numba loads only without the compiled kernel
+
+        beier_neely_field(xs, ys, table, float(a), float(b), int(BLOCK_COLUMNS), out)
     return out
 
 

@@ -72,12 +72,17 @@ def cluster():
         assert set(client.run(os.environ.get, "MALLOC_TRIM_THRESHOLD_").values()) == {None}
         address = client.scheduler.address
         assert address.startswith("tcp://127.0.0.1:")
-        # every port the workers and the scheduler (this process) listen on is on 127.0.0.1
-        for p in [psutil.Process(pid) for pid in pids] + [psutil.Process()]:
+        # every port the workers, their nannies' host process (a child of this one, started
+        # as `python -m lipsync.batch.nannies`: no spawn re-import of the caller's script) and
+        # the scheduler (this process) listen on is on 127.0.0.1
+        hosts = [c for c in psutil.Process().children() if "lipsync.batch.nannies" in " ".join(c.cmdline())]
+        assert len(hosts) == 1 and {psutil.Process(pid).ppid() for pid in pids} == {hosts[0].pid}
+        for p in [psutil.Process(pid) for pid in pids] + hosts + [psutil.Process()]:
             listening = [c.laddr for c in p.net_connections("inet") if c.status == psutil.CONN_LISTEN]
             assert listening and all(a.ip == "127.0.0.1" for a in listening), (p, listening)
         yield address, client, pids
-    gone = psutil.wait_procs([psutil.Process(p) for p in pids if psutil.pid_exists(p)], timeout=10)[1]
+    gone = psutil.wait_procs([psutil.Process(p) for p in pids + [hosts[0].pid] if psutil.pid_exists(p)],
+                             timeout=10)[1]
     assert not gone, f"worker processes left behind: {gone}"
     assert _refused(address)
 

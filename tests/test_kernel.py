@@ -260,8 +260,9 @@ def test_every_path_of_the_compiled_kernel_on_random_tables(step, half, width):
 
 
 def test_without_the_compiled_extension_everything_falls_back_to_numba(banks):
-    """An install whose C build failed (no compiler): the same frames within 2 levels and
-    the same yuv bytes, from numba, with nothing else changed."""
+    """An install whose C build failed (no compiler): the same frames within 2 levels, the
+    same yuv bytes and the same Beier-Neely fields (within rounding), from numba, with
+    nothing else changed."""
     bank_dir = banks["full"].path
     script = f"""
 import sys, numpy as np
@@ -273,18 +274,21 @@ sys.meta_path.insert(0, NoExtension())
 from lipsync import render
 from lipsync.bank import Bank
 from lipsync.yuv import rgb_to_yuv420p
-assert render._flowkernel is None and render.available_kernels() == ["numba"]
-r = render.Renderer(Bank.load({str(bank_dir)!r}))
+from lipsync import warp
+assert render._flowkernel is None and render.available_kernels() == ["numba"] and warp._compiled is None
+bank = Bank.load({str(bank_dir)!r})
+r = render.Renderer(bank)  # its flows are computed here too, by numba's field kernel
 frame = r.render("X", "O", 0.4)
 np.save(sys.argv[1], frame)
 np.save(sys.argv[2], rgb_to_yuv420p(frame))
+np.save(sys.argv[3], warp.beier_neely_displacement(bank.shape, dst_lines=bank.lines["X"], src_lines=bank.lines["O"]))
 print(r.kernel)
 """
     import tempfile
 
     with tempfile.TemporaryDirectory() as d:
-        f, y = os.path.join(d, "f.npy"), os.path.join(d, "y.npy")
-        run = subprocess.run([sys.executable, "-c", script, f, y], capture_output=True, text=True)
+        f, y, b = os.path.join(d, "f.npy"), os.path.join(d, "y.npy"), os.path.join(d, "b.npy")
+        run = subprocess.run([sys.executable, "-c", script, f, y, b], capture_output=True, text=True)
         assert run.returncode == 0, run.stderr
         assert run.stdout.strip() == "numba"
         frame = np.load(f)
@@ -293,3 +297,8 @@ print(r.kernel)
         from lipsync.yuv import rgb_to_yuv420p
 
         np.testing.assert_array_equal(np.load(y), rgb_to_yuv420p(frame))
+        from lipsync.warp import beier_neely_displacement
+
+        bank = banks["full"]
+        field = beier_neely_displacement(bank.shape, dst_lines=bank.lines["X"], src_lines=bank.lines["O"])
+        np.testing.assert_allclose(np.load(b), field, atol=1e-4)

@@ -83,10 +83,14 @@ def test_translating_all_lines_translates_every_pixel():
     np.testing.assert_allclose(m - identity_grid((50, 60)), np.broadcast_to(shift, (50, 60, 2)), atol=1e-4)
 
 
+KERNELS = [None, "plain", "numba"]  # compiled (AVX2 where the CPU has it), its portable path, numba's copy
+
+
 @settings(max_examples=25, deadline=None)
-@given(seed=st.integers(0, 2**31 - 1), n=st.integers(1, 12), a=st.floats(0.1, 5), b=st.floats(0.5, 2.5),
-       p=st.floats(0, 1))
-def test_matches_plain_reference(seed, n, a, b, p):
+@given(seed=st.integers(0, 2**31 - 1), n=st.integers(1, 12), a=st.floats(0.1, 5),
+       b=st.one_of(st.sampled_from([1.0, 2.0, 4.0]), st.floats(0.5, 4.5)), p=st.floats(0, 1),
+       kernel=st.sampled_from(KERNELS))
+def test_matches_plain_reference(seed, n, a, b, p, kernel):
     rng = np.random.default_rng(seed)
     dst = rng.uniform(-5, 45, (n, 2, 2))
     src = dst + rng.normal(0, 5, (n, 2, 2))
@@ -94,18 +98,41 @@ def test_matches_plain_reference(seed, n, a, b, p):
     for L in (dst, src):
         short = np.linalg.norm(L[:, 1] - L[:, 0], axis=1) < 1
         L[short, 1] += 3
-    m = beier_neely_map((33, 41), dst_lines=dst, src_lines=src, a=a, b=b, p=p)
+    m = beier_neely_displacement((33, 41), dst_lines=dst, src_lines=src, a=a, b=b, p=p, kernel=kernel)
+    m += identity_grid((33, 41))
     np.testing.assert_allclose(m, reference_map((33, 41), dst, src, a, b, p), atol=1e-3)
 
 
-def test_chunking_covers_every_row(monkeypatch):
+def test_kernels_agree_and_threads_do_not_change_the_field():
+    # The compiled field's AVX2 and portable paths do the same float operations: identical;
+    # numba's copy (fastmath) within rounding. Fields computed in threads at once (as
+    # preprocessing does) equal those computed one at a time.
+    from concurrent.futures import ThreadPoolExecutor
+
+    rng = np.random.default_rng(5)
+    cases = []
+    for _ in range(6):
+        dst = rng.uniform(0, 90, (15, 2, 2))
+        cases.append((dst, dst + rng.normal(0, 4, (15, 2, 2))))
+    run = lambda case, kernel=None: beier_neely_displacement((70, 97), dst_lines=case[0], src_lines=case[1],
+                                                              b=4.0, kernel=kernel)
+    serial = [run(c) for c in cases]
+    with ThreadPoolExecutor(3) as ex:
+        threaded = list(ex.map(run, cases))
+    for one, par, case in zip(serial, threaded, cases):
+        np.testing.assert_array_equal(one, par)
+        np.testing.assert_array_equal(one, run(case, "plain"))
+        np.testing.assert_allclose(one, run(case, "numba"), atol=1e-4)
+
+
+def test_blocks_cover_every_column(monkeypatch):
     import lipsync.warp as w
 
     rng = np.random.default_rng(3)
     dst = rng.uniform(0, 30, (4, 2, 2))
     src = dst + rng.normal(0, 3, (4, 2, 2))
     whole = beier_neely_map((29, 31), dst_lines=dst, src_lines=src)
-    monkeypatch.setattr(w, "CHUNK_PIXELS", 100)  # 3 rows per chunk, last chunk partial
+    monkeypatch.setattr(w, "BLOCK_COLUMNS", 7)  # 5 blocks, the last one partial
     np.testing.assert_array_equal(beier_neely_map((29, 31), dst_lines=dst, src_lines=src), whole)
 
 

@@ -201,7 +201,6 @@ def connect(workers: Optional[int] = None, scheduler: Optional[str] = None) -> I
     ...     print(where, sum(client.nthreads().values()))
     LocalCluster tcp://127.0.0.1:40123 (2 worker processes) 2
     """
-    import dask
     from distributed import Client, LocalCluster
 
     if scheduler is not None:
@@ -217,21 +216,88 @@ def connect(workers: Optional[int] = None, scheduler: Optional[str] = None) -> I
     n = workers if workers is not None else (os.cpu_count() or 1)
     if n < 1:
         raise InputError(f"--workers must be at least 1, got {n}")
-    # The scheduler always serves HTTP (health, metrics): on 127.0.0.1 at a free port, not on
-    # the dashboard's 8787 (taken by any other cluster on the machine); no dashboard pages.
-    # Worker processes start without dask's MALLOC_TRIM_THRESHOLD_: setting it turns off
-    # glibc's adaptive mmap threshold, so every frame-sized temporary is mmapped and
-    # page-faulted afresh; measured here, it costs a clip +34% CPU and up to twice the wall
-    # time (docs/scaling.md). Dask's one-thread OpenMP/BLAS settings stay. Its own logs are
+    # The scheduler runs here, in a LocalCluster with no workers of its own; the workers'
+    # nannies run in a child process started as `python -m lipsync.batch.nannies` (a
+    # LocalCluster's own nannies spawn their workers by re-importing the caller's main
+    # module: a script without a main guard ran again in each). The scheduler always
+    # serves HTTP (health, metrics): on 127.0.0.1 at a free port, not on the dashboard's
+    # 8787 (taken by any other cluster on the machine); no dashboard pages. Worker processes
+    # start without dask's MALLOC_TRIM_THRESHOLD_: setting it turns off glibc's adaptive
+    # mmap threshold, so every frame-sized temporary is mmapped and page-faulted afresh;
+    # measured here, it costs a clip +34% CPU and up to twice the wall time
+    # (docs/scaling.md). Dask's one-thread OpenMP/BLAS settings stay. Its own logs are
     # silenced: a heartbeat racing the shutdown is logged as an error, and what matters to
     # the user (a clip failed, a worker died) is in the report.
-    with dask.config.set({"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}), \
-            _workers_ignore_ctrl_c():
-        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
-                               dashboard_address="127.0.0.1:0", scheduler_kwargs={"dashboard": False},
-                               silence_logs=logging.CRITICAL)
-    with cluster, Client(cluster, set_as_default=False) as client:
-        yield client, f"LocalCluster {cluster.scheduler_address} ({n} worker process{'es' if n > 1 else ''})"
+    cluster = LocalCluster(n_workers=0, processes=False, protocol="tcp://", host="127.0.0.1",
+                           dashboard_address="127.0.0.1:0", scheduler_kwargs={"dashboard": False},
+                           silence_logs=logging.CRITICAL)
+    with cluster:
+        host = _start_worker_host(cluster.scheduler_address, n)
+        try:
+            _wait_until_ready(host)
+            with Client(cluster, set_as_default=False) as client:
+                _wait_for_workers(client, n, host)
+                yield client, f"LocalCluster {cluster.scheduler_address} ({n} worker process{'es' if n > 1 else ''})"
+        finally:
+            _stop_worker_host(host)
+
+
+#: Longest wait for the local workers to start (a cold start imports numpy, OpenCV and
+#: dask in each: seconds; a busy machine: tens of seconds).
+WORKER_START_TIMEOUT_S = 180
+#: How long the worker host may take to stop its workers before it is killed (its workers
+#: end with it: they watch their nanny).
+WORKER_HOST_EXIT_S = 15
+
+
+def _start_worker_host(address: str, n: int):
+    """The child process running ``n`` nannies for the scheduler at ``address`` (lipsync.batch.nannies)."""
+    import subprocess
+
+    with _workers_ignore_ctrl_c():
+        return subprocess.Popen([sys.executable, "-m", "lipsync.batch.nannies", address, str(n)],
+                                stdin=subprocess.PIPE, stdout=subprocess.PIPE)
+
+
+def _wait_until_ready(host) -> None:
+    """Until the host says all its nannies have started; an error if it exits first."""
+    import threading
+
+    from .nannies import READY
+
+    line: List[bytes] = []
+    reader = threading.Thread(target=lambda: line.append(host.stdout.readline()), daemon=True)
+    reader.start()
+    reader.join(WORKER_START_TIMEOUT_S)
+    if not line:
+        raise RuntimeError(f"the local dask workers did not start within {WORKER_START_TIMEOUT_S} s")
+    if line[0].strip() != READY.encode():
+        host.wait()
+        raise RuntimeError(f"the local dask workers could not start (their host exited with {host.returncode})")
+
+
+def _stop_worker_host(proc) -> None:
+    """Close the host's stdin (it then stops its nannies and workers and exits); wait for it."""
+    import subprocess
+
+    proc.stdin.close()
+    try:
+        proc.wait(WORKER_HOST_EXIT_S)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.wait()
+    proc.stdout.close()
+
+
+def _wait_for_workers(client, n: int, host) -> None:
+    """Until ``n`` workers are connected; an error naming the cause if the host died first."""
+    deadline = time.monotonic() + WORKER_START_TIMEOUT_S
+    while len(client.scheduler_info(n_workers=-1)["workers"]) < n:
+        if host.poll() is not None:
+            raise RuntimeError(f"the local dask workers could not start (their host exited with {host.returncode})")
+        if time.monotonic() > deadline:
+            raise RuntimeError(f"the local dask workers did not start within {WORKER_START_TIMEOUT_S} s")
+        time.sleep(0.05)
 
 
 def _task(job: ClipJob) -> ClipTask:

@@ -35,9 +35,9 @@ def add_store_option(parser: argparse.ArgumentParser) -> None:
 
 
 def add_jobs_option(parser: argparse.ArgumentParser, what: str = "preprocessing") -> None:
-    """``--jobs N``: worker processes."""
+    """``--jobs N``: threads computing flows."""
     parser.add_argument("--jobs", "-j", type=int, default=None, metavar="N",
-                        help=f"processes for {what} (default: all cores)")
+                        help=f"threads for {what} (default: all cores)")
 
 
 def add_quiet_option(parser: argparse.ArgumentParser) -> None:

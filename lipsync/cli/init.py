@@ -25,10 +25,17 @@ def add_parser(sub) -> None:
                         "template's lines; auto: face when a face is found, else template (default)")
     p.add_argument("--rest", default=None, metavar="VISEME", help="the rest viseme (default: X, rest or sil)")
     p.add_argument("--force", action="store_true", help="replace an existing bank.yaml")
+    from ._init_video import add_video_options
+
+    add_video_options(p)
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.video:
+        from ._init_video import run_video
+
+        return run_video(args)
     from ..banks.init import init_bank, parse_face_box
     from ..banks.names import parse_names_option
 

@@ -409,9 +409,15 @@ def _run_jobs(jobs: list, workers: int, bar) -> list:
 
     # Forked workers start in milliseconds with the modules (and any decoder this process
     # already loaded) in place; pocketsphinx decoders are not shared, each has its copy.
+    from .._proc import die_with_parent
+
     context = multiprocessing.get_context("fork")
     results: list = [None] * len(jobs)
-    with ProcessPoolExecutor(max_workers=min(workers, len(jobs)), mp_context=context) as pool:
+    # A worker killed with its parent still decodes its chunk, then waits on the task queue
+    # for ever: it ends with the parent instead (issue 19). Forked from the main thread
+    # (_can_fork), which PR_SET_PDEATHSIG watches.
+    with ProcessPoolExecutor(max_workers=min(workers, len(jobs)), mp_context=context,
+                             initializer=die_with_parent, initargs=(os.getpid(),)) as pool:
         futures = {pool.submit(_chunk_job, job): i for i, job in enumerate(jobs)}
         from concurrent.futures import as_completed
 

@@ -1,0 +1,187 @@
+"""Real-speaker figures (``videobank``): a bank made from video, judged against the real speaker.
+
+1. **Speed.** ``lipsync init --video`` (:func:`lipsync.videobank.make_bank`) on GRID's
+   :data:`~lipsync.bench.grid.BANK_CLIPS` (10 sentences, 30 s of 360×288 video): wall time
+   to a finished bank, flows included, with this process's and its workers' CPU time and
+   each step's share; the same clips at 1280×720 (scaled up 2.5× and pillarboxed by the
+   ``face`` figure's helper, GRID's sound muxed back in).
+2. **Quality** on the 30 held-out sentences (:func:`~lipsync.bench.grid.held_out`), each
+   rendered from its own sound and transcript through the real pipeline
+   (:meth:`lipsync.Animator.from_audio`: the aligner, the phoneme map, the sequencer, the
+   flow renderer) at the video's 25 fps, frame i beside the real frame i:
+
+   * **lip opening over time** (inner-lip gap over eye distance,
+     :func:`lipsync.face.measure.lip_opening`) from the face mesh tracked through the rendered
+     frames and through the real ones; its correlation with the real speaker's, per clip
+     (mean over clips) and pooled over all frames;
+   * **mouth-region PSNR and SSIM** after registering each rendered frame onto the real one by
+     the still points (:func:`lipsync.face.compare.register`, region
+     :func:`~lipsync.face.compare.mouth_box` of the real face).
+
+   Against two baselines from the same bank and the same cues:
+
+   * **hard cuts** — every frame shows one of the bank's pictures: the viseme the morph is
+     nearer to (the sequencer's alpha rounded to 0 or 1), so the cut falls in the middle of
+     each transition and the sequencer's rules (closures held, short sounds) stay; what
+     Rhubarb-style tools show;
+   * **still** — the rest picture held for the whole clip (its lip opening is constant, so it
+     has no correlation; it is the floor for PSNR).
+"""
+
+from __future__ import annotations
+
+import os
+import resource
+import subprocess
+import time
+import warnings
+from pathlib import Path
+from typing import Dict, List
+
+import numpy as np
+
+from . import FIGURES, Context
+from . import grid
+
+
+def _cpu() -> float:
+    """CPU seconds of this process and of its finished children (the flow workers)."""
+    me = resource.getrusage(resource.RUSAGE_SELF)
+    kids = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return me.ru_utime + me.ru_stime + kids.ru_utime + kids.ru_stime
+
+
+def _make(out: Path, videos: List[Path], texts: Dict[Path, str]):
+    from ..videobank import make_bank
+
+    t0, c0 = time.perf_counter(), _cpu()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the aligner's and the tracker's notes: counted elsewhere
+        result = make_bank(out, videos, texts=texts, force=True, quiet=True)
+    return result, time.perf_counter() - t0, _cpu() - c0
+
+
+def _with_sound(videos: List[Path], tmp: Path) -> List[Path]:
+    """The clips at 1280x720 (the face figure's scaling) with their own sound muxed back in."""
+    import imageio_ffmpeg
+
+    from .face import _upscaled
+
+    out = []
+    for src, silent in zip(videos, _upscaled(videos, tmp)):
+        p = tmp / f"{src.stem}.mp4"
+        subprocess.run([imageio_ffmpeg.get_ffmpeg_exe(), "-v", "error", "-y", "-i", str(silent), "-i", str(src),
+                        "-map", "0:v", "-map", "1:a", "-c:v", "copy", "-c:a", "aac", str(p)], check=True)
+        out.append(p)
+    return out
+
+
+def _corr(a: np.ndarray, b: np.ndarray) -> float:
+    ok = np.isfinite(a) & np.isfinite(b)
+    if ok.sum() < 3 or np.std(a[ok]) < 1e-9 or np.std(b[ok]) < 1e-9:
+        return float("nan")
+    return float(np.corrcoef(a[ok], b[ok])[0, 1])
+
+
+#: The compared renderings, in the order printed.
+METHODS = ("flow morph", "hard cuts", "still")
+
+
+def judge_clip(bank, clip: str, mesh=None) -> Dict[str, Dict[str, np.ndarray]]:
+    """One held-out sentence rendered three ways, measured against its real frames.
+
+    Returns
+    -------
+    dict
+        Method → ``{"open": lip opening per frame, "psnr": ..., "ssim": ...}``; also
+        ``"real"`` → ``{"open": ...}``.
+    """
+    from ..animator import Animator
+    from ..face import measure as M
+    from ..face.compare import mouth_box, psnr, register, ssim
+    from ..face.landmarks import FaceMesh
+    from ..face.track import track_frames
+    from ..face.video import read_video
+
+    mesh = mesh or FaceMesh()
+    real = list(read_video(grid.video(clip)))
+    real_track = grid.track(clip)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        anim = Animator.from_audio(bank, grid.video(clip), grid.transcript(clip), fps=real_track.fps)
+    n = min(len(anim), len(real))
+    renders = {
+        "flow morph": [anim.frame(i) for i in range(n)],
+        "hard cuts": [anim.renderer.render(s.from_viseme, s.to_viseme, float(round(s.alpha))).copy()
+                      for s in anim.specs[:n]],
+        "still": [anim.renderer.nb.images[bank.rest]] * n,
+    }
+    out = {"real": {"open": M.lip_opening(real_track.points[:n])}}
+    shape = real[0].shape[:2]
+    for method, frames in renders.items():
+        tr = track_frames(frames, fps=real_track.fps, mesh=mesh)
+        opening = M.lip_opening(tr.points)
+        ps, ss = [], []
+        for i in range(n):
+            if not (tr.found[i] and real_track.found[i]):
+                continue
+            warped, _, _ = register(frames[i], tr.points[i], real_track.points[i], shape=shape)
+            box = mouth_box(real_track.points[i], shape)
+            ps.append(psnr(warped, real[i], box))
+            ss.append(ssim(warped, real[i], box))
+        out[method] = {"open": opening, "psnr": np.array(ps), "ssim": np.array(ss)}
+    return out
+
+
+@FIGURES.decorator("videobank")
+def videobank_figures(ctx: Context, rows: List[dict]) -> None:
+    from ..bank import Bank
+    from ..face.landmarks import FaceMesh
+
+    names = [c for c in grid.BANK_CLIPS if grid.video(c).is_file()]
+    if len(names) < len(grid.BANK_CLIPS):
+        rows.append({"figure": "videobank", "case": f"skipped: GRID's bank clips are not in {grid.grid_dir()}"})
+        return
+    videos = [grid.video(c) for c in names]
+    texts = {v: grid.transcript(c) for v, c in zip(videos, names)}
+    seconds = sum(grid.track(c).times()[-1] + 1 / grid.track(c).fps for c in names)
+
+    result, wall, cpu = _make(ctx.tmp / "grid-s1", videos, texts)
+    steps = ", ".join(f"{k} {v:.1f}" for k, v in result.seconds.items())
+    rows.append({"figure": "videobank", "case": f"init --video, {len(videos)} clips ({seconds:.0f} s, 360x288)",
+                 "wall_s": round(wall, 1), "cpu_s": round(cpu, 1), "bank": "x".join(map(str, result.size)),
+                 "steps_s": steps, "cores": os.cpu_count()})
+    big = _with_sound(videos[:3] if ctx.quick else videos, ctx.tmp)
+    r720, wall720, cpu720 = _make(ctx.tmp / "grid-720p", big, {b: texts[v] for b, v in zip(big, videos)})
+    rows.append({"figure": "videobank", "case": f"init --video, {len(big)} clips at 1280x720",
+                 "wall_s": round(wall720, 1), "cpu_s": round(cpu720, 1), "bank": "x".join(map(str, r720.size)),
+                 "steps_s": ", ".join(f"{k} {v:.1f}" for k, v in r720.seconds.items()), "cores": os.cpu_count()})
+
+    bank = Bank.load(result.path)
+    clips = grid.held_out()[:6] if ctx.quick else grid.held_out()
+    mesh = FaceMesh()
+    per = {m: {"corr": [], "psnr": [], "ssim": []} for m in METHODS}
+    pooled = {m: [] for m in METHODS + ("real",)}
+    for clip in clips:
+        got = judge_clip(bank, clip, mesh)
+        pooled["real"].append(got["real"]["open"])
+        for m in METHODS:
+            per[m]["corr"].append(_corr(got[m]["open"], got["real"]["open"]))
+            per[m]["psnr"].append(float(np.mean(got[m]["psnr"])))
+            per[m]["ssim"].append(float(np.mean(got[m]["ssim"])))
+            pooled[m].append(got[m]["open"])
+    real_all = np.concatenate(pooled["real"])
+    flow_corr, cut_corr = np.array(per["flow morph"]["corr"]), np.array(per["hard cuts"]["corr"])
+    flow_psnr, cut_psnr = np.array(per["flow morph"]["psnr"]), np.array(per["hard cuts"]["psnr"])
+    for m in METHODS:
+        c = np.array(per[m]["corr"])
+        row = {"figure": "videobank", "case": f"held out: {m} ({len(clips)} clips)",
+               "lip_corr_mean": None if np.all(np.isnan(c)) else round(float(np.nanmean(c)), 3),
+               "lip_corr_pooled": None if m == "still" else round(_corr(np.concatenate(pooled[m]), real_all), 3),
+               "mouth_psnr_db": round(float(np.mean(per[m]["psnr"])), 2),
+               "mouth_ssim": round(float(np.mean(per[m]["ssim"])), 4)}
+        if m == "flow morph":
+            row["clips_corr_above_cuts"] = f"{int((flow_corr > cut_corr).sum())}/{len(clips)}"
+            row["clips_psnr_above_cuts"] = f"{int((flow_psnr > cut_psnr).sum())}/{len(clips)}"
+            row["psnr_over_still_db"] = round(float(np.mean(flow_psnr - np.array(per['still']['psnr']))), 2)
+        rows.append(row)

@@ -1,0 +1,268 @@
+"""Step 5: one frame per viseme — candidates from the speech, ranked by the face.
+
+**Candidates.** A viseme's candidates are the frames in the *steady middle* of the spans the
+aligned speech gives it (:data:`STEADY_TRIM` of each end left out: there the lips are still
+coming from the sound before or already going to the next); a span too short to have a
+middle gives its one frame nearest the centre. The rest viseme's candidates come from
+silence of at least :data:`REST_MIN_S`: its frames at least :data:`REST_GUARD_S` away from speech (lips part before a word
+begins and settle after it ends).
+
+**Ranking** (lowest score wins; each term's scale is named with its reason):
+
+* *typical shape* — the distance of the frame's mouth
+  (:func:`lipsync.face.measure.mouth_shape`: the 40 lip points in the eyes' frame, in eye
+  distances) from the median mouth of all the viseme's candidates, over the candidates'
+  median distance. A viseme spoken in many contexts shows a spread of shapes (a B between
+  two open vowels is more open than one between closures); the most typical is the one
+  that stands for the viseme best wherever the renderer shows it;
+* *steady lips* — the lips' speed (eye distances per second) over :data:`MOTION_SCALE`:
+  a frame between two shapes is blurred and not any viseme;
+* *eyes open* — a blink is never chosen (:data:`BLINK_BELOW`), half-closed eyes cost;
+* *low stabilisation residual* — the head turned or nodded against the reference pose
+  shows as still points the similarity could not fit (:data:`RESIDUAL_SCALE`): such a
+  frame would morph with a swimming face;
+* *sharpness* — the mouth region's detail (variance of its Laplacian) against the sharpest
+  finalist, once the best :data:`FINALISTS` per viseme have been cut out of the video.
+
+**Visemes the video never shows** get the picture of the closest shape available
+(:data:`NEAREST_SHAPES`) and a warning that names them and the sounds to record.
+
+Examples
+--------
+>>> steady_frames(1.0, 1.4, 25.0, 100)
+[28, 29, 30, 31, 32]
+>>> steady_frames(1.0, 1.04, 25.0, 100)   # one frame long: the one nearest the middle
+[26]
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+from typing import Dict, List, Optional, Sequence, Tuple
+
+import numpy as np
+
+from ..face import measure as M
+from ..face import topology as T
+
+#: Share of a span left out at each end: its middle half is its steady part (a held sound
+#: reaches its shape within ~50-80 ms and leaves it as late before the next; GRID's
+#: phones last 60-200 ms).
+STEADY_TRIM = 0.25
+#: Only a silence this long shows the mouth at rest: the sequencer holds the last shape
+#: through shorter pauses (:data:`lipsync.sequencer.MAX_HELD_PAUSE_S`, 0.2 s), and so do
+#: speakers; a longer one leaves a relaxed middle once the guards below are taken off.
+REST_MIN_S = 0.35
+#: Silence frames closer than this to speech are not rest candidates: lips part ~100-200 ms
+#: before the first sound of a word (anticipation) and settle as long after it.
+REST_GUARD_S = 0.16
+#: Eyes less open than this share of the video's median opening are a blink: never chosen.
+BLINK_BELOW = 0.6
+#: A stabilisation residual of this many eye distances (1.4 px on GRID's 46-px eye
+#: distance; the head turned about 3 degrees) costs as much as a mouth one typical spread
+#: from the viseme's median shape. GRID's frames measure 0.008-0.04.
+RESIDUAL_SCALE = 0.03
+#: Lip speed (eye distances per second) that costs as much as one typical spread: lips in
+#: the middle of a transition move at ~2 eye distances per second, held ones at ~0.2.
+MOTION_SCALE = 2.0
+#: A frame at half the sharpness of the viseme's sharpest finalist costs half a spread.
+SHARPNESS_WEIGHT = 1.0
+#: Eyes half as open as usual (but not a blink) cost this much.
+EYES_WEIGHT = 1.0
+#: How many of each viseme's best-ranked candidates are cut out of the video and judged on
+#: sharpness (decoding them again costs one pass over the video).
+FINALISTS = 6
+
+#: For each Rhubarb mouth shape, the other shapes from most to least alike (by opening,
+#: rounding and what touches the lips), for a viseme the video never shows. Names of other
+#: systems (Preston Blair, Oculus) go through their Rhubarb twins
+#: (:data:`lipsync.banks.names.SYSTEMS`).
+NEAREST_SHAPES = {
+    "A": "XBGFEHCD",   # closed lips: the relaxed closed mouth, then teeth together
+    "B": "CHXAGEFD",   # teeth nearly together: slightly more open, L, the rest
+    "C": "BHDEXFAG",   # open: less open, L's open jaw, wide open
+    "D": "CEHBFXAG",   # wide open: open, rounded open
+    "E": "FCDBHXAG",   # slightly rounded: puckered, open
+    "F": "EBXACHDG",   # puckered: slightly rounded, then small openings
+    "G": "BAXCHFED",   # lower lip under the upper teeth: teeth together, closed
+    "H": "CBDEXFAG",   # tongue up, jaw open: open, teeth together
+    "X": "ABGFECHD",   # rest: closed lips, then nearly closed
+}
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """A frame that may show a viseme, with its scores.
+
+    Attributes
+    ----------
+    video : int
+        Index of its video in the run.
+    frame : int
+    time : float
+        Seconds.
+    viseme : str
+    span : (float, float)
+        The speech span (or silence) it lies in.
+    typicality, motion, eyes, residual, sharpness : float
+        The ranking terms (see the module docstring); ``sharpness`` NaN until measured.
+    score : float
+        The sum of the penalties (lower is better).
+    """
+
+    video: int
+    frame: int
+    time: float
+    viseme: str
+    span: Tuple[float, float]
+    typicality: float = math.nan
+    motion: float = math.nan
+    eyes: float = math.nan
+    residual: float = math.nan
+    sharpness: float = math.nan
+    score: float = math.nan
+
+    def report(self) -> dict:
+        """The scores as plain numbers (for the JSON report)."""
+        def r(x, n=4):
+            return None if x is None or not math.isfinite(x) else round(float(x), n)
+
+        return {"frame": self.frame, "time": r(self.time, 3), "span": [r(self.span[0], 3), r(self.span[1], 3)],
+                "score": r(self.score), "typicality": r(self.typicality), "motion": r(self.motion),
+                "eyes": r(self.eyes), "residual": r(self.residual), "sharpness": r(self.sharpness, 1)}
+
+
+def steady_frames(start: float, end: float, fps: float, n_frames: int, *, trim: float = STEADY_TRIM) -> List[int]:
+    """Frames (frame n shows time n / fps) in the steady middle of ``[start, end)``."""
+    d = end - start
+    a, b = start + trim * d, end - trim * d
+    frames = [n for n in range(max(0, math.ceil(a * fps - 1e-9)), min(n_frames, math.floor(b * fps + 1e-9) + 1))
+              if a - 1e-9 <= n / fps <= b + 1e-9]
+    if not frames:
+        mid = int(round((start + end) / 2 * fps))
+        if 0 <= mid < n_frames and start - 0.5 / fps <= mid / fps < end + 0.5 / fps:
+            frames = [mid]
+    return frames
+
+
+def rest_frames(spans: Sequence, index: int, fps: float, n_frames: int, *, guard: float = REST_GUARD_S
+                ) -> List[int]:
+    """Frames of silence span ``spans[index]`` at least ``guard`` seconds from speech."""
+    s = spans[index]
+    if s.end - s.start < REST_MIN_S:
+        return []
+    a = s.start + (guard if index > 0 else 0.0)
+    b = s.end - (guard if index < len(spans) - 1 else 0.0)
+    return [n for n in range(max(0, math.ceil(a * fps - 1e-9)), min(n_frames, math.floor(b * fps + 1e-9) + 1))
+            if a - 1e-9 <= n / fps <= b + 1e-9]
+
+
+def candidates(spans: Sequence, *, video: int, fps: float, found: np.ndarray, rest: str) -> List[Candidate]:
+    """Every candidate frame of one video (frames with a face only)."""
+    out = []
+    n = len(found)
+    for i, s in enumerate(spans):
+        frames = rest_frames(spans, i, fps, n) if s.label == rest else steady_frames(s.start, s.end, fps, n)
+        out += [Candidate(video=video, frame=f, time=f / fps, viseme=s.label, span=(s.start, s.end))
+                for f in frames if found[f]]
+    return out
+
+
+def lip_speed(points: np.ndarray, fps: float) -> np.ndarray:
+    """Mean speed of the 40 lip points, eye distances per second, per frame (central differences)."""
+    lips = list(dict.fromkeys(T.LIP_OUTER_UPPER + T.LIP_OUTER_LOWER + T.LIP_INNER_UPPER + T.LIP_INNER_LOWER))
+    p = np.asarray(points, np.float64)[:, lips, :2] / M.eye_distance(points)[:, None, None]
+    if len(p) < 2:
+        return np.zeros(len(p))
+    v = np.gradient(p, axis=0) * fps
+    return np.linalg.norm(v, axis=-1).mean(axis=-1)
+
+
+@dataclass(frozen=True)
+class FrameMeasures:
+    """Per-frame measures of one video that the ranking uses."""
+
+    shape: np.ndarray      # (N, 80) mouth_shape
+    motion: np.ndarray     # (N,) lip speed
+    eyes: np.ndarray       # (N,) eye opening over the video's median
+    residual: np.ndarray   # (N,) stabilisation residual
+
+    @classmethod
+    def of(cls, points: np.ndarray, fps: float, residual: np.ndarray) -> "FrameMeasures":
+        eyes = M.eye_opening(points)
+        return cls(shape=M.mouth_shape(points), motion=lip_speed(points, fps),
+                   eyes=eyes / np.nanmedian(eyes), residual=np.asarray(residual, np.float64))
+
+
+def rank(cands: Sequence[Candidate], measures: Sequence[FrameMeasures]) -> Dict[str, List[Candidate]]:
+    """Candidates scored and sorted best first, per viseme (blinks left out when a viseme has
+    other candidates)."""
+    by: Dict[str, List[Candidate]] = {}
+    for c in cands:
+        by.setdefault(c.viseme, []).append(c)
+    out = {}
+    for v, group in by.items():
+        shapes = np.stack([measures[c.video].shape[c.frame] for c in group])
+        dist = np.linalg.norm(shapes - np.median(shapes, axis=0), axis=1)
+        typ = dist / max(float(np.median(dist)), 1e-9)
+        scored = []
+        for c, t in zip(group, typ):
+            m = measures[c.video]
+            eyes, motion, res = float(m.eyes[c.frame]), float(m.motion[c.frame]), float(m.residual[c.frame])
+            score = (float(t) + motion / MOTION_SCALE + res / RESIDUAL_SCALE
+                     + EYES_WEIGHT * max(0.0, 1.0 - eyes))
+            scored.append(replace(c, typicality=float(t), motion=motion, eyes=eyes, residual=res, score=score))
+        open_eyes = [c for c in scored if c.eyes >= BLINK_BELOW]
+        out[v] = sorted(open_eyes or scored, key=lambda c: c.score)
+    return out
+
+
+def with_sharpness(finalists: Sequence[Candidate], sharpness: Sequence[float]) -> List[Candidate]:
+    """Finalists of one viseme with their sharpness added to the score, best first."""
+    top = max(max(sharpness), 1e-9)
+    out = [replace(c, sharpness=float(s), score=c.score + SHARPNESS_WEIGHT * (1.0 - float(s) / top))
+           for c, s in zip(finalists, sharpness)]
+    return sorted(out, key=lambda c: c.score)
+
+
+def sharpness(image: np.ndarray, box: Tuple[int, int, int, int]) -> float:
+    """Variance of the Laplacian of the luma in ``box`` (``x0, y0, x1, y1``): focus and motion
+    blur both lower it."""
+    import cv2
+
+    x0, y0, x1, y1 = box
+    grey = cv2.cvtColor(np.ascontiguousarray(image[y0:y1, x0:x1]), cv2.COLOR_RGB2GRAY)
+    return float(cv2.Laplacian(grey, cv2.CV_64F).var()) if grey.size else 0.0
+
+
+def rhubarb_shape(viseme: str) -> Optional[str]:
+    """The Rhubarb mouth shape a viseme name stands for (any known naming system), or None."""
+    from ..banks.names import SYSTEMS
+
+    for table in SYSTEMS.values():
+        if viseme in table:
+            return table[viseme]
+    return None
+
+
+def nearest_available(missing: str, available: Sequence[str], *, fallback: Optional[str] = None) -> str:
+    """The available viseme whose mouth shape is most like ``missing``'s.
+
+    Examples
+    --------
+    >>> nearest_available("G", ["X", "A", "B", "C"])
+    'B'
+    >>> nearest_available("kk", ["sil", "PP", "DD", "aa"])   # k and t both teeth together
+    'DD'
+    """
+    shape = rhubarb_shape(missing)
+    if shape is not None:
+        order = shape + NEAREST_SHAPES[shape]
+        ranked = sorted(((order.index(s), i, v) for i, v in enumerate(available)
+                         if (s := rhubarb_shape(v)) is not None and s in order))
+        if ranked:
+            return ranked[0][2]
+    if fallback is not None and fallback in available:
+        return fallback
+    return available[0]

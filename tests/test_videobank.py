@@ -1,0 +1,321 @@
+"""``lipsync init OUTDIR --video``: a subject made from real video (tests/data/grid-s1, CC BY 4.0,
+see SOURCE.md there), checked with independent expectations: analytic transforms, GRID's own
+word alignments, the face mesh run again on the written pictures and on the decoded render.
+"""
+
+from __future__ import annotations
+
+import argparse
+import doctest
+import importlib
+import json
+import warnings
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from lipsync.bank import Bank
+from lipsync.cli import main
+from lipsync.errors import InputError
+from lipsync.face import measure as M
+from lipsync.face import topology as T
+from lipsync.face.landmarks import FaceMesh
+from lipsync.readers.grid import read_words
+from lipsync.videobank import make_bank
+from lipsync.videobank.colour import match_colour, still_skin_mask
+from lipsync.videobank.select import NEAREST_SHAPES, nearest_available, steady_frames
+from lipsync.videobank.stabilise import fit_similarity
+from lipsync.videobank.write import Staging
+
+GRID = Path(__file__).parent / "data" / "grid-s1"
+#: The bank is made from two clips; the third (with three P's) is rendered.
+BANK = ("bbwm5s", "lwae8n")
+HELD = "prap6p"
+
+
+def _words(clip: str):
+    p = GRID / f"{clip}.align"
+    return read_words(str(p), p.read_bytes())
+
+
+def _transcript(clip: str) -> str:
+    return " ".join(s.label for s in _words(clip))
+
+
+@pytest.fixture(scope="module")
+def mesh():
+    return FaceMesh()
+
+
+@pytest.fixture(scope="module")
+def made(tmp_path_factory):
+    out = tmp_path_factory.mktemp("videobank") / "me"
+    videos = [GRID / f"{c}.mpg" for c in BANK]
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        result = make_bank(out, videos, texts={v: _transcript(v.stem) for v in videos}, quiet=True)
+    return result, [str(w.message) for w in caught]
+
+
+@pytest.mark.parametrize("module", ["config", "sources", "speech", "stabilise", "select", "colour", "cut", "write",
+                                    "make"])
+def test_docstring_examples(module):
+    mod = importlib.import_module(f"lipsync.videobank.{module}")
+    assert doctest.testmod(mod, optionflags=doctest.ELLIPSIS | doctest.IGNORE_EXCEPTION_DETAIL).failed == 0
+
+
+# --- the steps, on their own ------------------------------------------------------------------
+
+def test_similarity_fit_recovers_an_analytic_transform():
+    rng = np.random.default_rng(3)
+    z = rng.normal(size=(5, 8)) + 1j * rng.normal(size=(5, 8))
+    c = 1.7 * np.exp(1j * np.radians([3, -10, 45, 0, 170]))
+    t = np.array([5 - 2j, 0, 1j, -3, 100 + 100j])
+    got_c, got_t, res = fit_similarity(z, c[:, None] * z + t[:, None])
+    assert np.allclose(got_c, c) and np.allclose(got_t, t) and res.max() < 1e-9
+    # noise on the target shows up as the residual, of the noise's size
+    noise = 0.01 * (rng.normal(size=z.shape) + 1j * rng.normal(size=z.shape))
+    _, _, res = fit_similarity(z, c[:, None] * z + t[:, None] + noise)
+    assert 0.003 < res.mean() < 0.02
+
+
+def test_steady_middle_of_a_span():
+    # 100-300 ms at 25 fps: frames at 150-250 ms are its middle half
+    assert steady_frames(0.1, 0.3, 25.0, 100) == [4, 5, 6]
+    # a span at the end of the video keeps only frames that exist
+    assert steady_frames(3.8, 4.4, 25.0, 100) == [99]
+
+
+def test_nearest_shapes_table_orders_every_other_shape_once():
+    for shape, order in NEAREST_SHAPES.items():
+        assert sorted(order + shape) == sorted("ABCDEFGHX")
+    assert nearest_available("D", ["A", "C", "X"]) == "C"
+    assert nearest_available("U", ["sil", "PP", "O", "aa"]) == "O"      # puckered -> rounded
+    assert nearest_available("zz", ["X", "B"], fallback="B") == "B"     # unknown name: the map's fallback
+
+
+def test_colour_matching_undoes_a_camera_gain(mesh):
+    from lipsync.face.video import read_video
+
+    frame = next(iter(read_video(GRID / "prap6p.mpg"))).copy()
+    pts = mesh.find(frame)
+    gain = np.array([0.8, 0.9, 1.15])
+    other = np.clip(np.round(frame * gain), 0, 255).astype(np.uint8)
+    mask = still_skin_mask(pts, frame.shape[:2])
+    # the mask is skin: inside the face, above the mouth, without the eyes
+    ys, xs = np.nonzero(mask)
+    assert mask.sum() > 500
+    assert ys.max() < pts[list(T.LIP_OUTER_UPPER), 1].min()
+    assert not mask[tuple(np.round(pts[[159, 386], 1::-1]).astype(int).T)].any()  # upper lids
+    out, gains = match_colour({"a": frame, "b": other, "c": frame}, {"a": mask, "b": mask, "c": mask})
+    # the target is the median: two frames agree, so the odd one is brought to them
+    assert np.allclose(gains["a"], 1.0, atol=1e-3)
+    assert np.allclose(np.array(gains["b"]) * gain, 1.0, atol=0.01)
+    assert np.abs(out["b"][mask].mean(0) - frame[mask].mean(0)).max() < 1.0
+
+
+def test_staging_leaves_nothing_on_failure_and_replaces_with_force(tmp_path):
+    out = tmp_path / "bank"
+    with pytest.raises(KeyboardInterrupt):
+        with Staging(out) as tmp:
+            (tmp / "X.png").write_bytes(b"half")
+            raise KeyboardInterrupt
+    assert list(tmp_path.iterdir()) == []
+    out.mkdir()
+    (out / "old.txt").write_text("old")
+    with pytest.raises(InputError, match="not empty"):
+        with Staging(out):
+            pass
+    with pytest.raises(RuntimeError):
+        with Staging(out, force=True) as tmp:
+            (tmp / "new.txt").write_text("new")
+            raise RuntimeError("disk full")
+    assert [p.name for p in out.iterdir()] == ["old.txt"]   # the previous bank is untouched
+    with Staging(out, force=True) as tmp:
+        (tmp / "new.txt").write_text("new")
+    assert [p.name for p in out.iterdir()] == ["new.txt"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["bank"]
+
+
+# --- a bank from two real clips ---------------------------------------------------------------
+
+def test_bank_from_video_loads_and_is_complete(made, tmp_path):
+    result, caught = made
+    bank = Bank.load(result.path)
+    assert list(bank.names) == ["A", "B", "C", "D", "E", "F", "G", "H", "X"] and bank.rest == "X"
+    h, w = bank.shape
+    assert (w, h) == result.size and w % 2 == 0 and h % 2 == 0
+    assert main(["check", str(result.path)]) == 0
+    # every flow is there: rendering computes nothing
+    from lipsync.preprocess import preprocess
+
+    assert preprocess(bank, quiet=True, jobs=1).computed == 0
+    report = json.loads((result.path / "init-report.json").read_text())
+    assert [v["video"] for v in report["videos"]] == ["bbwm5s.mpg", "lwae8n.mpg"]
+    for v, entry in report["visemes"].items():
+        assert entry["video"] in ("bbwm5s.mpg", "lwae8n.mpg") and entry["image"] == f"{v}.png"
+        assert 0.0 <= entry["time"] <= 3.0
+    assert cv2.imread(str(result.path / "preview.png")).shape[0] > h
+    # neither clip says an R, AO or ER: E is borrowed, and the warning names it and its sounds
+    assert result.missing == {"E": "F"} and report["missing"]["E"]["uses"] == "F"
+    assert any("never shows E (" in m and "ER" in m and "samples/record-script.txt" in m for m in caught)
+
+
+def test_chosen_frames_show_their_shapes(made, mesh):
+    result, _ = made
+    bank = Bank.load(result.path)
+    opening = {v: float(M.lip_opening(mesh.find(bank.images[v]))) for v in bank.names}
+    # closed lips for P B M and at rest, open for the vowels (measured again on the PNGs)
+    for closed in ("A", "X"):
+        for open_ in ("C", "D"):
+            assert opening[closed] < 0.5 * opening[open_], opening
+    # F V: lower lip under the upper teeth, nearly closed
+    assert opening["G"] < opening["C"]
+    # the chosen frames lie in the steady middle of a span of their viseme (the report's span)
+    report = json.loads((result.path / "init-report.json").read_text())
+    for v in "ABCDFGH":
+        a, b = report["visemes"][v]["span"]
+        assert a <= report["visemes"][v]["time"] <= b
+
+
+def test_pictures_are_stabilised_onto_one_pose(made, mesh):
+    result, _ = made
+    bank = Bank.load(result.path)
+    h, w = bank.shape
+    pts = np.stack([mesh.find(bank.images[v]) for v in bank.names])[..., :2]
+    still = pts[:, list(T.STILL_POINTS)]
+    d = float(np.median(M.eye_distance(pts)))
+    # the still points agree across the pictures to a few hundredths of the eye distance
+    spread = np.linalg.norm(still - still.mean(axis=0), axis=-1)
+    assert spread.max() < 0.05 * d, spread.max() / d
+    # eyes level, the face centred on the middle column, the neck below the chin in the picture
+    left, right = M.eye_centres(pts)
+    tilt = np.degrees(np.arctan2(right[:, 1] - left[:, 1], right[:, 0] - left[:, 0]))
+    assert np.abs(tilt).max() < 1.5
+    assert abs(float(np.median(pts[:, list(T.MIDLINE_POINTS), 0])) - (w - 1) / 2) < 0.1 * d
+    chin = pts[:, 152, 1].max()
+    assert h - 1 - chin > 0.4 * d
+    lines = dict(zip(bank.line_names, bank.lines["X"]))
+    assert "neck_l" in lines and "neck_r" in lines
+
+
+def test_render_with_the_bank_follows_the_speech(made, tmp_path, mesh):
+    from lipsync.clip import render_clip
+    from lipsync.face.track import track_frames
+    from lipsync.face.video import probe_video, read_video
+    from lipsync.speech.align import align
+
+    result, _ = made
+    video = GRID / f"{HELD}.mpg"
+    out = tmp_path / "held.mp4"
+    opts = argparse.Namespace(text=_transcript(HELD), timeline_format="audio")  # the .mpg's sound
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        render_clip(video, out, bank=result.path, quiet=True, timeline_options=opts)
+        phones = align(video, _transcript(HELD)).phones
+    info = probe_video(out)
+    assert info.has_audio and info.size == result.size
+    frames = list(read_video(out))
+    tr = track_frames(frames, fps=info.fps, mesh=mesh)
+    assert tr.found.all()
+    opening = M.lip_opening(tr.points)
+    t = tr.times()
+    # GRID's own word times (independent of lipsync's aligner): open in speech, closed outside
+    words = _words(HELD)
+    inside = np.zeros(len(t), bool)
+    for wd in words:
+        inside |= (t >= wd.start) & (t < wd.end)
+    quiet = (t < words[0].start - 0.2) | (t > words[-1].end + 0.2)
+    # (most of "place red at p six please" is B, teeth nearly together: a modest opening)
+    assert opening[inside].mean() > 1.3 * np.median(opening[quiet])
+    assert opening[inside].max() > 1.8 * np.median(opening[quiet])
+    assert np.median(opening[quiet]) < 0.04
+    # every P B M: the lips close on the frame nearest its middle
+    bilabial = [s for s in phones if s.label.rstrip("012") in ("P", "B", "M")]
+    assert len(bilabial) >= 3
+    a_open = float(M.lip_opening(mesh.find(Bank.load(result.path).images["A"])))
+    for s in bilabial:
+        i = int(round((s.start + s.end) / 2 * info.fps))
+        assert opening[i] < max(0.045, a_open + 0.015), (s, opening[i])
+        assert opening[i] < 0.5 * opening[inside].max()
+
+
+# --- the command line ---------------------------------------------------------------------------
+
+def _write_video(path: Path, frames, audio=None):
+    import imageio_ffmpeg
+
+    h, w = frames[0].shape[:2]
+    kw = {"audio_path": str(audio), "audio_codec": "aac"} if audio else {}
+    gen = imageio_ffmpeg.write_frames(str(path), (w, h), fps=25, codec="libx264", pix_fmt_out="yuv420p",
+                                      macro_block_size=1, **kw)
+    gen.send(None)
+    for f in frames:
+        gen.send(np.ascontiguousarray(f))
+    gen.close()
+    return path
+
+
+def test_cli_refuses_bad_videos_naming_the_file(tmp_path, capsys):
+    from lipsync.face.video import read_video
+
+    frames = list(read_video(GRID / "bbwm5s.mpg"))
+    silent = _write_video(tmp_path / "silent.mp4", frames[:10])
+    assert main(["init", str(tmp_path / "a"), "--video", str(silent)]) == 2
+    err = capsys.readouterr().err
+    assert "silent.mp4" in err and "no audio stream" in err
+    blank = _write_video(tmp_path / "blank.mp4", [np.full((120, 160, 3), 90, np.uint8)] * 75, audio=GRID / "bbwm5s.mpg")
+    assert main(["init", str(tmp_path / "b"), "--video", str(blank), "--text", "bin blue", "-q"]) == 2
+    err = capsys.readouterr().err
+    assert "blank.mp4" in err and "no face" in err
+    # speech from start to end: nothing to take the rest shape from
+    busy = _write_video(tmp_path / "busy.mp4", frames[20:49])  # 0.80-1.96 s: all speech (GRID's .align)
+    import imageio_ffmpeg
+    import subprocess
+
+    talk = tmp_path / "talk.mp4"
+    subprocess.run([imageio_ffmpeg.get_ffmpeg_exe(), "-v", "error", "-i", str(busy), "-ss", "0.80", "-t", "1.16",
+                    "-i", str(GRID / "bbwm5s.mpg"), "-map", "0:v", "-map", "1:a", "-c:v", "copy", "-c:a", "aac",
+                    "-shortest", str(talk)], check=True)
+    assert main(["init", str(tmp_path / "c"), "--video", str(talk), "--text", "bin blue with m five soon", "-q"]) == 2
+    err = capsys.readouterr().err
+    assert "talk.mp4" in err and "no silence" in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(["silent.mp4", "blank.mp4", "busy.mp4", "talk.mp4"])
+
+
+def test_cli_refuses_before_any_work(tmp_path, capsys):
+    full = tmp_path / "full"
+    full.mkdir()
+    (full / "keep.txt").write_text("mine")
+    v = str(GRID / "bbwm5s.mpg")
+    assert main(["init", str(full), "--video", v]) == 2
+    assert "not empty" in capsys.readouterr().err and (full / "keep.txt").read_text() == "mine"
+    assert main(["init", str(tmp_path / "x"), "--video", v, str(GRID / "lwae8n.mpg"), "--text", "hi"]) == 2
+    assert "one video" in capsys.readouterr().err
+    assert main(["init", str(tmp_path / "x"), "--video", v, "--lines", "template"]) == 2
+    assert "--lines" in capsys.readouterr().err
+    assert main(["init", str(tmp_path / "x"), "--video", v, "--size", "12x12"]) == 2
+    assert "--size" in capsys.readouterr().err
+    assert main(["init", str(tmp_path / "x"), "--video", str(tmp_path / "none.mp4")]) == 2
+    assert "none.mp4: no such file" in capsys.readouterr().err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["full"]
+
+
+def test_cli_interrupted_leaves_no_bank(tmp_path, monkeypatch, capsys):
+    import lipsync.preprocess
+
+    def interrupted(*a, **k):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(lipsync.preprocess, "preprocess", interrupted)
+    (tmp_path / "in").mkdir()
+    video = tmp_path / "in" / "bbwm5s.mpg"
+    video.symlink_to(GRID / "bbwm5s.mpg")
+    (tmp_path / "in" / "bbwm5s.txt").write_text(_transcript("bbwm5s"))   # the transcript beside the video
+    out = tmp_path / "out"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        assert main(["init", str(out), "--video", str(video), "-q", "--size", "160x160"]) == 130
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["in"]
