@@ -29,7 +29,7 @@ _EXPORTS = {
     "MapError": "errors",
     "Segment": "timeline",
     "Timeline": "timeline",
-    "read_timeline": "timeline",
+    "read_timeline": "readers",
     "PhonemeMap": "phonemes",
     "load_map": "phonemes",
     "map_timeline": "phonemes",

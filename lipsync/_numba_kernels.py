@@ -9,7 +9,6 @@ compiled kernel's, see lipsync.render and lipsync.yuv.
 import numba as _nb
 import numpy as np
 
-from .yuv import _CHALF as _CHALF_INT, _COEFFICIENTS, _SHIFT, _YHALF as _YHALF_INT
 
 
 @_nb.njit(cache=True, nogil=True, fastmath=True, boundscheck=False)
@@ -181,20 +180,20 @@ def warp_blend(pa, pb, da, db, by0, bx0, bh, bw, step, ry0, ry1, rx0, rx1, ka, o
             out[y, x, 2] = (((acc_a >> 42) & m) * ka + ((acc_b >> 42) & m) * kb + 8388608) >> 24
 
 
-# int32 constants keep the arithmetic in 32 bits (numba would widen to int64 around
-# Python ints); with luma in its own row loop this measured 1.1 ms per 1280x720 frame
-# against 1.5 ms for one int64 loop over 2x2 blocks.
+# int32 values keep the arithmetic in 32 bits (numba would widen to int64 around Python
+# ints); with luma in its own row loop this measured 1.1 ms per 1280x720 frame against 1.5
+# ms for one int64 loop over 2x2 blocks. The constants come from lipsync.yuv, as arguments
+# (the compiled kernel takes them the same way: one source, and no import of yuv here).
 _I = np.int32
-_C = tuple(_I(v) for v in _COEFFICIENTS)
-_YHALF = _I(_YHALF_INT)
-_CHALF = _I(_CHALF_INT)
-_S1, _S2 = _I(_SHIFT), _I(_SHIFT + 2)
 
 
 @_nb.njit(cache=True, nogil=True, boundscheck=False)
-def rgb_to_yuv420p(rgb, out):  # pragma: no cover - compiled
+def rgb_to_yuv420p(rgb, out, coefficients, yhalf, chalf, shift):  # pragma: no cover - compiled
     # Flat rows (3 bytes a pixel): twice as fast as indexing [x, channel] (2.35 ms -> 1.1).
-    yr, yg, yb, ur, ug, ub, vr, vg, vb = _C
+    # coefficients: 9 int32 (Y, U, V rows of R, G, B weights); yhalf, chalf, shift: int32.
+    s1 = shift
+    s2 = shift + _I(2)
+    yr, yg, yb, ur, ug, ub, vr, vg, vb = coefficients
     h, w = rgb.shape[0], rgb.shape[1]
     flat = rgb.reshape(h, w * 3)
     cw = w // 2
@@ -205,7 +204,7 @@ def rgb_to_yuv420p(rgb, out):  # pragma: no cover - compiled
         o = r * w
         for x in range(w):
             k = 3 * x
-            out[o + x] = np.uint8((yr * _I(row[k]) + yg * _I(row[k + 1]) + yb * _I(row[k + 2]) + _YHALF) >> _S1)
+            out[o + x] = np.uint8((yr * _I(row[k]) + yg * _I(row[k + 1]) + yb * _I(row[k + 2]) + yhalf) >> s1)
     for j in range(h // 2):
         a = flat[2 * j]
         b = flat[2 * j + 1]
@@ -214,5 +213,5 @@ def rgb_to_yuv420p(rgb, out):  # pragma: no cover - compiled
             rs = _I(a[k]) + _I(a[k + 3]) + _I(b[k]) + _I(b[k + 3])
             gs = _I(a[k + 1]) + _I(a[k + 4]) + _I(b[k + 1]) + _I(b[k + 4])
             bs = _I(a[k + 2]) + _I(a[k + 5]) + _I(b[k + 2]) + _I(b[k + 5])
-            out[u0 + j * cw + i] = np.uint8((ur * rs + ug * gs + ub * bs + _CHALF) >> _S2)
-            out[v0 + j * cw + i] = np.uint8((vr * rs + vg * gs + vb * bs + _CHALF) >> _S2)
+            out[u0 + j * cw + i] = np.uint8((ur * rs + ug * gs + ub * bs + chalf) >> s2)
+            out[v0 + j * cw + i] = np.uint8((vr * rs + vg * gs + vb * bs + chalf) >> s2)

@@ -29,7 +29,8 @@ from .phonemes import DEFAULT_MAP, PhonemeMap, bank_viseme_timeline, load_map
 from .render import Renderer
 from .sequencer import FrameSpec, check_fps, sequence
 from .store import FlowStore
-from .timeline import Timeline, read_timeline
+from .timeline import Timeline
+from .readers import read_timeline
 from .timing import DEFAULT_CURVE
 
 

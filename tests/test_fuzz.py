@@ -54,7 +54,8 @@ from lipsync._data import data_dir, default_bank_dir
 from lipsync.bank import MAX_IMAGE_PIXELS, MAX_LINES, MAX_VISEMES, Bank
 from lipsync.errors import BankError, InputError, MapError, TimelineError
 from lipsync.phonemes import PhonemeMap, load_map
-from lipsync.timeline import READERS, Timeline, read_timeline
+from lipsync.timeline import Timeline
+from lipsync.readers import READERS, read_timeline
 
 ROOT = Path(__file__).resolve().parent.parent
 DATA = ROOT / "tests" / "data"
@@ -174,7 +175,9 @@ SEED_FILES: Dict[str, List[Path]] = {
     "moho": _files("tests/data/timelines/*.dat"),
     "pgo": _files("tests/data/conformance/papagayo/*.pgo", "tests/data/timelines/papagayo_*.pgo"),
     "timit": _files("samples/*.phn", "tests/data/timelines/timit_*.PHN", "tests/data/timelines/timit_*.phn"),
-    "audacity": _files("samples/*.txt", "tests/data/timelines/audacity_*.txt"),
+    # (samples/record-script.txt is text to read aloud, not a label track)
+    "audacity": [p for p in _files("samples/*.txt", "tests/data/timelines/audacity_*.txt")
+                 if p.name != "record-script.txt"],
     "polly": _files("tests/data/timelines/polly_*.txt"),
     "azure": _files("tests/data/timelines/azure_*.json"),
     "whisper": _files("tests/data/timelines/whisper_*.json"),

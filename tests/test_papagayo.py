@@ -16,7 +16,7 @@ import pytest
 
 from lipsync.cli import main
 from lipsync.errors import TimelineError
-from lipsync.timeline import read_timeline
+from lipsync.readers import read_timeline
 
 DATA = Path(__file__).parent / "data"
 EXAMPLE = DATA / "conformance" / "papagayo" / "example1.pgo"

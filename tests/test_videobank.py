@@ -319,3 +319,45 @@ def test_cli_interrupted_leaves_no_bank(tmp_path, monkeypatch, capsys):
         warnings.simplefilter("ignore")
         assert main(["init", str(out), "--video", str(video), "-q", "--size", "160x160"]) == 130
     assert sorted(p.name for p in tmp_path.iterdir()) == ["in"]
+
+
+def test_record_script_shows_every_viseme_of_both_maps():
+    from collections import Counter
+
+    from lipsync.phonemes import load_map
+    from lipsync.speech.lexicon import lookup_missing
+    from lipsync.speech.phonetise import phones_of, typical_duration
+    from lipsync.speech.text import normalise_transcript
+
+    text = (Path(__file__).parents[1] / "samples" / "record-script.txt").read_text()
+    words = normalise_transcript(text)
+    assert lookup_missing(words) == []                   # every word in the pronouncing dictionary
+    phones = phones_of(text)
+    # at most 30 s read aloud: the phones' typical durations plus a second for each pause
+    assert typical_duration(phones) + text.strip().count("\n\n") + 2 <= 30
+    for name in ("english-to-rhubarb", "english-to-oculus"):
+        pmap = load_map(name)
+        seen = Counter(v for p in phones for v in pmap.targets(p))
+        assert {v: seen[v] for v in pmap.visemes() if v != pmap.silence and seen[v] < 4} == {}, name
+
+
+def test_shipped_real_subject(mesh):
+    import fnmatch
+    import tomllib
+
+    root = Path(__file__).parents[1]
+    folder = root / "visemes" / "grid-s1"
+    bank = Bank.load(folder)
+    assert list(bank.names) == ["A", "B", "C", "D", "E", "F", "G", "H", "X"]
+    assert {"lip_inner_upper_l#0", "jaw_r#3", "neck_l"} <= set(bank.line_names)
+    # GRID's licence asks for the attribution beside the files, and the package ships it
+    source = (folder / "SOURCE.md").read_text()
+    assert "CC BY 4.0" in source and "Cooke" in source
+    patterns = tomllib.loads((root / "pyproject.toml").read_text())["tool"]["setuptools"]["package-data"][
+        "lipsync._visemes"]
+    for name in ("SOURCE.md", "bank.yaml", "A.png", "init-report.json"):
+        assert any(fnmatch.fnmatch(f"grid-s1/{name}", p) for p in patterns), name
+    report = json.loads((folder / "init-report.json").read_text())
+    assert report["made_by"] == "lipsync init --video" and not report["missing"]
+    opening = {v: float(M.lip_opening(mesh.find(bank.images[v]))) for v in bank.names}
+    assert max(opening["A"], opening["X"]) < 0.5 * min(opening["C"], opening["D"]), opening

@@ -17,7 +17,8 @@ import os
 from typing import Iterable, Optional, Tuple
 
 from ..phonemes import DEFAULT_MAP, MAPS, PhonemeMap, bank_viseme_timeline, load_map
-from ..timeline import READERS, Timeline, read_timeline
+from ..timeline import Timeline
+from ..readers import READERS, read_timeline
 from ..timing import CURVES, DEFAULT_CURVE
 
 DEFAULT_MOHO_FPS = 24.0

@@ -9,7 +9,8 @@ are ARPAbet without stress digits, as the other readers give them; silence is ga
 
 from __future__ import annotations
 
-from ..timeline import READERS, Reader, ReadOptions, Timeline
+from ..timeline import Timeline
+from .base import READERS, Reader, ReadOptions
 
 # Magic numbers at the start of the audio containers people save speech in.
 _MAGIC = (b"RIFF", b"RF64", b"fLaC", b"OggS", b"ID3", b"\x1a\x45\xdf\xa3", b"FORM", b"caff",

@@ -59,7 +59,8 @@ import warnings
 from typing import Dict, List, Tuple
 
 from ..errors import TimelineError
-from ..timeline import PHONEME, READERS, VISEME, Reader, ReadOptions, Timeline
+from ..timeline import PHONEME, VISEME, Timeline
+from .base import READERS, Reader, ReadOptions
 from ._common import build, decode_text, first_nonblank, parse_number, sniff_text
 
 MAGIC = "lipsync version 1"

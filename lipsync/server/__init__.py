@@ -216,7 +216,7 @@ def _demo_events():
     phn = SAMPLES / "hello.phn"
     if not phn.is_file():
         return None
-    from ..timeline import read_timeline
+    from ..readers import read_timeline
 
     return [{"start": round(s.start, 6), "end": round(s.end, 6), "label": s.label, "kind": "phoneme"}
             for s in read_timeline(phn)]

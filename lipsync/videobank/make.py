@@ -142,7 +142,7 @@ def make_bank(outdir: PathLike, videos: Sequence[PathLike], *, text: Optional[st
     from ..face.video import read_video
     from ..phonemes import load_map
     from . import colour, select, stabilise, write
-    from .cut import cut_frames
+    from .cut import RAW_BUDGET_BYTES, grab_frames, warp_frame
     from .sources import find_sources
     from .speech import transcribe
 
@@ -196,28 +196,54 @@ def make_bank(outdir: PathLike, videos: Sequence[PathLike], *, text: Optional[st
     finalists = {v: r[:select.FINALISTS] for v, r in ranked.items()}
     t = lap("select", t)
 
-    # --- framing: the crop that every finalist fills
+    # --- framing, cut and sharpness: the finalists in a crop they all fill, at the bank's scale
     flat = [c for fs in finalists.values() for c in fs]
     scale = float(np.median([1.0 / abs(regs[c.video].c[c.frame]) for c in flat]))
-    frame = stabilise.framing([(regs[c.video], c.frame, sources[c.video].info.size) for c in flat],
-                              [regs[c.video].to_unit(c.frame, tracks[c.video].points[c.frame]) for c in flat],
-                              source_scale=scale, size=cfg.size, max_side=cfg.max_side, where=names)
-    w, h = frame.size
 
-    # --- cut the finalists out of the videos, judge their sharpness, choose
+    def framing_for(cands: List[Candidate]) -> "stabilise.Framing":
+        return stabilise.framing([(regs[c.video], c.frame, sources[c.video].info.size) for c in cands],
+                                 [regs[c.video].to_unit(c.frame, tracks[c.video].points[c.frame]) for c in cands],
+                                 source_scale=scale, size=cfg.size, max_side=cfg.max_side)
+
+    def out_points(fr, c: Candidate) -> np.ndarray:
+        return fr.points(regs[c.video], c.frame, tracks[c.video].points[c.frame])
+
+    frame = framing_for(flat)
+    w, h = frame.size
+    keep_raw = sum(int(np.prod(sources[c.video].info.size)) * 3 for c in flat) <= RAW_BUDGET_BYTES
+    raw: Dict[tuple, np.ndarray] = {}
     pictures: Dict[tuple, np.ndarray] = {}
     for i, s in enumerate(sources):
-        wanted = {c.frame: frame.matrix(regs[i], c.frame) for c in flat if c.video == i}
-        if wanted:
-            for f, img in cut_frames(s.path, wanted, (w, h)).items():
-                pictures[(i, f)] = img
-    points_out = {(c.video, c.frame): frame.points(regs[c.video], c.frame, tracks[c.video].points[c.frame])
-                  for c in flat}
+        wanted = sorted({c.frame for c in flat if c.video == i})
+        if not wanted:
+            continue
+        for f, img in grab_frames(s.path, wanted).items():
+            if keep_raw:
+                raw[(i, f)] = img
+            pictures[(i, f)] = warp_frame(img, frame.matrix(regs[i], f), (w, h))
     chosen: Dict[str, Candidate] = {}
     for v, fs in finalists.items():
-        sharp = [select.sharpness(pictures[(c.video, c.frame)], mouth_box(points_out[(c.video, c.frame)], (h, w)))
-                 for c in fs]
+        sharp = [select.sharpness(pictures[(c.video, c.frame)], mouth_box(out_points(frame, c), (h, w))) for c in fs]
         chosen[v] = select.with_sharpness(fs, sharp)[0]
+
+    # --- the final crop: as much room as the chosen frames' pictures give (more of the neck
+    # and shoulders for the template's anchors than the finalists all had)
+    picked = list({(c.video, c.frame): c for c in chosen.values()}.values())
+    final = framing_for(picked)
+    if final != frame:
+        frame = final
+        w, h = frame.size
+        for i, s in enumerate(sources):
+            wanted = sorted({c.frame for c in picked if c.video == i})
+            got = {f: raw[(i, f)] for f in wanted} if keep_raw else grab_frames(s.path, wanted) if wanted else {}
+            for f, img in got.items():
+                pictures[(i, f)] = warp_frame(img, frame.matrix(regs[i], f), (w, h))
+    raw.clear()
+    if frame.cut:
+        warnings.warn(f"{names}: the picture cuts the head at the {' and '.join(frame.cut)} (keep the whole head "
+                      f"and the neck in view, with some room around them); the bank is cropped tighter",
+                      UserWarning, stacklevel=2)
+    points_out = {(c.video, c.frame): out_points(frame, c) for c in picked}
     t = lap("cut", t)
 
     # --- visemes never shown: the nearest shape shown

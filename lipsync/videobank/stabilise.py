@@ -30,7 +30,6 @@ Examples
 
 from __future__ import annotations
 
-import warnings
 from dataclasses import dataclass
 from typing import Optional, Sequence, Tuple
 
@@ -229,8 +228,7 @@ def mirror_axis_unit(unit_points: Sequence[np.ndarray]) -> float:
 
 
 def framing(regs: Sequence[Tuple[Registration, int, Tuple[int, int]]], unit_points: Sequence[np.ndarray], *,
-            source_scale: float, size: Optional[Tuple[int, int]] = None, max_side: int = 512,
-            where: str = "video") -> Framing:
+            source_scale: float, size: Optional[Tuple[int, int]] = None, max_side: int = 512) -> Framing:
     """The crop and scale of the bank's pictures.
 
     Parameters
@@ -246,12 +244,12 @@ def framing(regs: Sequence[Tuple[Registration, int, Tuple[int, int]]], unit_poin
         ``(W, H)`` asked for: the crop is trimmed to its aspect and scaled to it.
     max_side : int
         Without ``size``: the longer side is scaled down to this.
-    where : str
-        For the warning when the picture cuts the head.
 
     Returns
     -------
     Framing
+        With ``cut`` naming the sides where the videos' pictures end before the margin the
+        face needs (the caller warns).
     """
     axis = mirror_axis_unit(unit_points)
     left, right, top, bottom = axis - HALF_WIDTH, axis + HALF_WIDTH, -TOP, BOTTOM
@@ -267,10 +265,6 @@ def framing(regs: Sequence[Tuple[Registration, int, Tuple[int, int]]], unit_poin
     top, bottom = -top, bottom  # distances from the eye line
     cut = tuple(name for name, have, need in (("top", top, TOP_NEEDED), ("bottom", bottom, BOTTOM_NEEDED),
                                               ("sides", half, HALF_WIDTH_NEEDED)) if have < need - 1e-9)
-    if cut:
-        warnings.warn(f"{where}: the picture cuts the head at the {' and '.join(cut)} (keep the whole head and "
-                      f"the neck in view, with some room around them); the bank is cropped tighter",
-                      UserWarning, stacklevel=3)
     if size is not None:
         w, h = size
         # trim the crop to the asked aspect: the sides first down to what the face needs,
