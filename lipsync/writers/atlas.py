@@ -14,7 +14,7 @@ import warnings
 from typing import Sequence
 
 from ..errors import InputError
-from . import WRITERS, Cue, CueOptions, Writer
+from .base import WRITERS, Cue, CueOptions, Writer
 
 
 def render(cues: Sequence[Cue], options: CueOptions) -> str:
