@@ -84,16 +84,17 @@ def _rss_mb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # kB on Linux
 
 
-_RSS_START_MB = _rss_mb()
+#: The process's peak when the first fuzz case starts -- not when this file is imported:
+#: tests that run earlier in the same session (numba's JIT, the face models) raise the
+#: peak on their own, and only growth during the fuzzing is this file's business.
+_RSS_START_MB = None
 
 
-@pytest.fixture(scope="module", autouse=True)
+@pytest.fixture(autouse=True)
 def _rss_baseline():
-    """The peak before the first fuzz test, not at import: in a whole-suite run the tests
-    that run between collection and this module (rendering, browsers) raise the process's
-    peak by hundreds of MB, which is not growth while reading fuzz inputs."""
     global _RSS_START_MB
-    _RSS_START_MB = _rss_mb()
+    if _RSS_START_MB is None:
+        _RSS_START_MB = _rss_mb()
     yield
 
 
