@@ -346,3 +346,46 @@ def test_no_crop_cells_are_whole_frames(tmp_path, renderer):
     assert np.array_equal(compose(atlas, tex, None, len(atlas.cells) - 1)[..., :3],
                           renderer.render(c.from_viseme, c.to_viseme, c.alpha))
     shutil.rmtree(tmp_path)
+
+
+# --- the dominance timing model ---------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def dominant_bank(tmp_path_factory):
+    """The toon with ``timing: dominance`` in its bank.yaml (flows copied along)."""
+    d = tmp_path_factory.mktemp("dom") / "toon"
+    shutil.copytree(default_bank_dir(), d)
+    text = (d / "bank.yaml").read_text()
+    (d / "bank.yaml").write_text(text.replace("rest: X\n", "rest: X\ntiming: dominance\n", 1))
+    assert Bank.load(d).timing == "dominance"
+    return d
+
+
+def test_dominance_frames_follow_the_banks_timing(tmp_path, dominant_bank):
+    bank = Bank.load(dominant_bank)
+    out = tmp_path / "mouth.png"
+    assert main(["atlas", str(dominant_bank), "-o", str(out), "-q", "-n", str(N), str(BALLOONS)]) == 0
+    atlas = load_atlas(out.with_suffix(".json"))
+    stored = {(c.from_viseme, c.to_viseme) for c in atlas.cells if c.viseme is None}
+    # the model blends the two heaviest sounds, not only neighbours: more pairs than the plan
+    assert stored > _cue_pairs(tmp_path, BALLOONS)
+    for fps in (24, 30):
+        frames = tmp_path / f"frames{fps}.json"
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")  # every pair the frames use is in the atlas
+            assert main(["cues", str(BALLOONS), "--format", "atlas", "--atlas", str(out.with_suffix(".json")),
+                         "--bank", str(dominant_bank), "--fps", str(fps), "-o", str(frames), "-q"]) == 0
+        doc = json.loads(frames.read_text())
+        specs = Animator(bank, BALLOONS, fps=fps).specs  # the bank's timing: dominance
+        rule_specs = Animator(bank, BALLOONS, fps=fps, timing="sqrt-fast-middle").specs
+        assert specs != rule_specs and len(doc["frames"]) == len(specs)
+        for n, (spec, cell) in enumerate(zip(specs, doc["frames"])):
+            assert cell in _nearest_cell(atlas, spec), (fps, n, spec)
+    # without --bank the bank's bank.yaml is unknown: --timing says it, else the default curve
+    a, b = tmp_path / "a.json", tmp_path / "b.json"
+    atlas_json = str(out.with_suffix(".json"))
+    assert main(["cues", str(BALLOONS), "--format", "atlas", "--atlas", atlas_json, "--fps", "25", "-o", str(a),
+                 "-q", "--timing", "dominance"]) == 0
+    assert main(["cues", str(BALLOONS), "--format", "atlas", "--atlas", atlas_json, "--fps", "25", "-o", str(b),
+                 "-q", "--bank", str(dominant_bank)]) == 0
+    assert json.loads(a.read_text())["frames"] == json.loads(b.read_text())["frames"]

@@ -23,7 +23,8 @@ __all__ = ["Atlas", "Cell", "CellIndex", "SCHEMA_VERSION", "build_atlas", "load_
 
 def __getattr__(name):
     # build_atlas / write_atlas pull in the renderer (OpenCV, the kernels): only on use.
-    if name in ("build_atlas", "write_atlas", "AtlasBuild", "compose", "pairs_in_plan", "bank_pairs"):
+    if name in ("build_atlas", "write_atlas", "AtlasBuild", "compose", "pairs_in_plan", "pairs_in_specs",
+                "bank_pairs"):
         from . import build
 
         return getattr(build, name)

@@ -81,6 +81,20 @@ def pairs_in_plan(plan: Iterable[Tuple[float, float, str]], names: Sequence[str]
     return sorted(found, key=lambda p: (order[p[0]], order[p[1]]))
 
 
+def pairs_in_specs(specs: Iterable, names: Sequence[str]) -> List[Tuple[str, str]]:
+    """The pairs a list of FrameSpecs morphs between, ordered as the bank orders its visemes.
+
+    Examples
+    --------
+    >>> from lipsync.sequencer import FrameSpec
+    >>> pairs_in_specs([FrameSpec("X", "X", 0.0), FrameSpec("X", "A", 0.4), FrameSpec("D", "A", 0.5)], "ADX")
+    [('A', 'X'), ('A', 'D')]
+    """
+    order = {v: i for i, v in enumerate(names)}
+    found = {tuple(sorted((s.from_viseme, s.to_viseme), key=order.__getitem__)) for s in specs if not s.is_still}
+    return sorted(found, key=lambda p: (order[p[0]], order[p[1]]))
+
+
 def _rgba(frame: np.ndarray) -> np.ndarray:
     """An RGBA copy of a renderer frame (RGB frames get alpha 255)."""
     if frame.shape[2] == 4:

@@ -4,7 +4,8 @@ Every viseme and ``--inbetweens`` in-betweens of each transition, rendered by th
 ``render`` uses, in one RGBA texture, with ``ATLAS.json`` saying where each cell is and
 which pair and alpha it holds (and ``ATLAS.base.png``, the part of the frame that never
 changes). The pairs are those the given timelines use (read, mapped and planned as
-``render`` does them) or, with ``--pairs all`` or no timeline, every pair of the bank.
+``render`` does them: the boundaries of the sequencer's plan, and with the dominance timing
+the pairs its frames blend) or, with ``--pairs all`` or no timeline, every pair of the bank.
 ``lipsync cues TIMELINE --format atlas --atlas ATLAS.json --fps F`` then gives the cell of
 every frame. ``--player`` puts the example player page beside the atlas.
 """
@@ -58,10 +59,12 @@ def add_parser(sub) -> None:
 def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
-    from ..atlas.build import build_atlas, pairs_in_plan, write_atlas
+    from ..atlas.build import build_atlas, pairs_in_plan, pairs_in_specs, write_atlas
     from ..bank import Bank
+    from ..coarticulation import resolve_timing, viseme_classes
     from ..errors import InputError
-    from ..sequencer import plan_segments
+    from ..sequencer import FPS_RANGE, plan_segments, sequence
+    from ..timing import is_model
     from ._common import check_png, load_viseme_timeline
 
     check_png(args.output)
@@ -76,11 +79,19 @@ def run(args: argparse.Namespace) -> int:
     pairs = "all"
     if mode == "used":
         pairs = []
+        timing = resolve_timing(args.timing, bank)
         for path in args.timelines:
             one = argparse.Namespace(**{**vars(args), "timeline": path})
             timeline, pmap = load_viseme_timeline(one, rest=bank.rest, viseme_names=bank.names)
             plan = plan_segments(timeline, rest=bank.rest, closures=pmap.closures)
-            pairs += [p for p in pairs_in_plan(plan, bank.names) if p not in pairs]
+            found = pairs_in_plan(plan, bank.names)
+            if is_model(timing) or not (isinstance(timing, str) or callable(timing)):
+                # the dominance model blends the two heaviest sounds, not only neighbours:
+                # its pairs are those its frames show, sampled at the highest frame rate
+                specs = sequence(timeline, fps=FPS_RANGE[1], rest=bank.rest, timing=timing,
+                                 closures=pmap.closures, classes=viseme_classes(pmap, bank.rest))
+                found += pairs_in_specs(specs, bank.names)
+            pairs += [p for p in found if p not in pairs]
     built = build_atlas(bank, pairs=pairs, inbetweens=args.inbetweens, method=args.method, store=args.store,
                         scale=args.scale, max_size=args.max_size, padding=args.padding, crop=args.crop,
                         jobs=args.jobs, quiet=args.quiet)

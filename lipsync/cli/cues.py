@@ -7,7 +7,9 @@ read (:data:`lipsync.writers.WRITERS`): Rhubarb's TSV, JSON and XML, Moho switch
 ``--fps``, a Praat TextGrid, or an Audacity label track; the format comes from ``--format``
 or the output's extension. ``--format atlas --atlas ATLAS.json`` writes the sprite-atlas cell
 of every frame at ``--fps`` instead (the frames ``render`` would draw, each the nearest cell
-of the atlas ``lipsync atlas`` made; the track keeps the atlas' viseme names).
+of the atlas ``lipsync atlas`` made; the track keeps the atlas' viseme names). Their timing is
+``--timing``, else the ``--bank``'s (its bank.yaml), else the default: give ``--bank`` for a
+bank that sets its own.
 """
 
 from __future__ import annotations
@@ -88,8 +90,10 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _atlas_frames(args: argparse.Namespace, fps: float) -> int:
-    """frames.json: the track in the atlas' viseme names, its frames as the atlas' cells."""
+    """frames.json: the timeline in the atlas' viseme names, sequenced as ``render`` does,
+    each frame the nearest cell of the atlas."""
     from ..atlas.schema import load_atlas
+    from ..coarticulation import resolve_timing, viseme_classes
     from ..errors import InputError
     from ..sequencer import plan_segments
     from ..writers import write_cues
@@ -97,6 +101,7 @@ def _atlas_frames(args: argparse.Namespace, fps: float) -> int:
     if args.atlas is None:
         raise InputError("--format atlas needs --atlas ATLAS.json (write one with `lipsync atlas BANK -o ATLAS.png`)")
     atlas = load_atlas(args.atlas)
+    bank = None
     if args.bank is not None:
         from ..bank import Bank
 
@@ -107,8 +112,11 @@ def _atlas_frames(args: argparse.Namespace, fps: float) -> int:
     # the atlas names the bank's visemes and rest: the track is matched to them as to a bank
     timeline, pmap = load_viseme_timeline(args, rest=atlas.rest, viseme_names=atlas.visemes)
     plan = plan_segments(timeline, rest=atlas.rest, closures=pmap.closures)
+    # the timing render would use: --timing, else the bank's (bank.yaml), else the default
+    timing = resolve_timing(args.timing, bank)
     write_cues(plan, args.output, "atlas", rest=atlas.rest, fps=fps, closures=pmap.closures,
-               duration=timeline.duration, timing=args.timing, atlas=atlas)
+               duration=timeline.duration, timing=timing, timeline=timeline,
+               classes=viseme_classes(pmap, atlas.rest), atlas=atlas)
     if not args.quiet:
         from ..sequencer import frame_count
 

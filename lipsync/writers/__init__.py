@@ -104,7 +104,8 @@ def format_for(path: PathLike) -> str:
 def write_cues(cues: Union[Timeline, Sequence[Cue]], path: PathLike, format: Optional[str] = None, *,
                rest: str = "X", fps: float = DEFAULT_FPS, tier: str = DEFAULT_TIER,
                sound_file: Optional[str] = None, names: Optional[Mapping[str, str]] = None,
-               closures: Iterable[str] = (), duration: Optional[float] = None, timing: str = DEFAULT_CURVE,
+               closures: Iterable[str] = (), duration: Optional[float] = None, timing=DEFAULT_CURVE,
+               timeline: Optional[Timeline] = None, classes: Optional[Mapping[str, str]] = None,
                atlas=None) -> str:
     """Write a viseme track as mouth cues; returns the format name used.
 
@@ -130,8 +131,15 @@ def write_cues(cues: Union[Timeline, Sequence[Cue]], path: PathLike, format: Opt
         Visemes shown however short (closed lips); Moho gives them a key first.
     duration : float, optional
         End of the track (default: the timeline's duration).
-    timing : str
-        Transition timing curve (the atlas frames follow the sequencer's frames).
+    timing : str or DominanceParams
+        How the mouth moves, as :func:`lipsync.sequencer.sequence` takes it (the atlas
+        frames are the sequencer's frames).
+    timeline : Timeline, optional
+        The viseme timeline the cues were planned from (the atlas frames sequence it, as
+        ``render`` does; default: the cues).
+    classes : mapping, optional
+        Viseme -> class, for the dominance timing model
+        (:func:`lipsync.coarticulation.viseme_classes`).
     atlas : Atlas, optional
         For ``atlas``: the sprite atlas (:func:`lipsync.atlas.load_atlas`) whose cells the
         frames name.
@@ -167,7 +175,8 @@ def write_cues(cues: Union[Timeline, Sequence[Cue]], path: PathLike, format: Opt
         raise InputError(f"frame rate must be a positive number, not {fps!r}")
     track, total = cue_track(cues, rest=rest, duration=duration)
     options = CueOptions(duration=total, rest=rest, fps=float(fps), tier=tier, sound_file=sound_file,
-                         names=dict(names or {}), closures=frozenset(closures), timing=timing, atlas=atlas,
+                         names=dict(names or {}), closures=frozenset(closures), timing=timing, timeline=timeline,
+                         classes=dict(classes) if classes is not None else None, atlas=atlas,
                          output=os.fspath(path))
     text = writer.render(track, options)
     data = text.encode("utf-8")

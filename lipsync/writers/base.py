@@ -45,8 +45,14 @@ class CueOptions:
     closures : frozenset
         Visemes that must be shown however short (the map's closures): Moho keys them first
         when cues share a frame.
-    timing : str
-        The transition timing curve (formats holding frames: the atlas frames).
+    timing : str or DominanceParams
+        How the mouth moves (formats holding frames, the atlas frames): what
+        :func:`lipsync.sequencer.sequence` takes as ``timing``.
+    timeline : Timeline, optional
+        The viseme timeline the cues were planned from (formats holding frames sequence it
+        as ``render`` does; default: the cues themselves).
+    classes : mapping, optional
+        Viseme -> articulatory class, for the dominance timing model.
     atlas : Atlas, optional
         The sprite atlas whose cells the atlas frames name (:mod:`lipsync.atlas`).
     output : str, optional
@@ -60,7 +66,9 @@ class CueOptions:
     sound_file: Optional[str] = None
     names: Mapping[str, str] = field(default_factory=dict)
     closures: FrozenSet[str] = frozenset()
-    timing: str = DEFAULT_CURVE
+    timing: object = DEFAULT_CURVE
+    timeline: Optional[object] = None
+    classes: Optional[Mapping[str, str]] = None
     atlas: Optional[object] = None
     output: Optional[str] = None
 
