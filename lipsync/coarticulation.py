@@ -755,7 +755,7 @@ def fit_speaker(recordings, values: Mapping[str, float], pmap) -> Optional[Domin
     (``make bench``, ``coarticulation_rendered``), with a bank made by ``lipsync init --video``
     from the 10 bank sentences: held-out sentences rendered with constants fitted this way
     (to the same 10 sentences) follow the real lips no better than with
-    :data:`DEFAULT_PARAMS` (r 0.720 against 0.721; an earlier bank of the same speaker:
+    :data:`DEFAULT_PARAMS` (r 0.719 against 0.721; an earlier bank of the same speaker:
     0.676 against 0.671), so ``init --video`` keeps the defaults; a speaker unlike the one
     they were fitted on may gain more.
 
