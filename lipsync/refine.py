@@ -125,7 +125,10 @@ def matching_channel(image: np.ndarray) -> np.ndarray:
     >>> int(matching_channel(skin)[0, 0]) != int(matching_channel(lip)[0, 0])
     True
     """
-    lab = cv2.cvtColor(np.ascontiguousarray(image[..., :3]), cv2.COLOR_RGB2LAB)
+    rgb = np.ascontiguousarray(image[..., :3])
+    if image.shape[-1] == 4:  # a sprite: match what shows (premultiplied), not hidden colours
+        rgb = (rgb.astype(np.uint16) * image[..., 3:] // 255).astype(np.uint8)
+    lab = cv2.cvtColor(rgb, cv2.COLOR_RGB2LAB)
     red = 128.0 + CHROMA_GAIN * (lab[..., 1].astype(np.float32) - 128.0)
     out = 0.5 * lab[..., 0].astype(np.float32) + 0.5 * np.clip(red, 0.0, 255.0)
     return np.clip(np.rint(out), 0, 255).astype(np.uint8)

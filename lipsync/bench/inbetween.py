@@ -285,3 +285,52 @@ def _figure(ctx: Context, rows: List[dict]) -> None:
                      "refined_s_per_pair": round(float(np.median(timings["refined"])), 3),
                      "lines_only_s_per_pair": round(float(np.median(timings["lines"])), 3),
                      "ratio": round(float(np.median(timings["refined"]) / np.median(timings["lines"])), 2)})
+
+
+def _variant(src: Path, dst: Path, refine: bool) -> Path:
+    """A copy of the bank folder ``src`` (without its store) saying ``refine: <refine>``."""
+    import shutil
+
+    import yaml
+
+    from ..banks.yamlio import dump_bank, header_comments, write_bank_text
+
+    if not dst.exists():
+        shutil.copytree(src, dst, ignore=shutil.ignore_patterns(".lipsync"))
+        text = (dst / "bank.yaml").read_text()
+        doc = yaml.safe_load(text)
+        doc = {k: v for k, v in doc.items() if k not in ("visemes", "refine")} | {"refine": refine,
+                                                                                  "visemes": doc["visemes"]}
+        write_bank_text(dst / "bank.yaml", dump_bank(doc, header=header_comments(text)))
+    return dst
+
+
+@FIGURES.decorator("refine_speed")
+def _refine_speed(ctx: Context, rows: List[dict]) -> None:
+    """The ``frame`` (toon) and ``whole_frame`` (drawn face) figures, measured side by side in
+    one run on each bank with ``refine: true`` (the default) and ``refine: false`` (the line
+    flows alone, as before issue 22): per-frame speed ratios, preprocessing time and store size."""
+    from .render import _face_banks, _toon_banks, bench_methods, bench_store, bench_whole_frame
+
+    for name, banks, bench in (("frame", _toon_banks(ctx), bench_methods),
+                               ("whole_frame", _face_banks(ctx), bench_whole_frame)):
+        for refine in (False, True):
+            variants = {label: _variant(path, ctx.tmp / f"refine-{refine}-{path.name}", refine)
+                        for label, path in banks.items()}
+            for label, path in variants.items():
+                t, c = time.perf_counter(), time.process_time()
+                from ..bank import Bank
+                from ..preprocess import all_pairs, preprocess
+
+                bank = Bank.load(path)
+                preprocess(bank, quiet=True)
+                n = len(all_pairs(bank.names))
+                rows.append({"figure": "refine_speed_preprocess", "bank": f"{name} {label}", "refine": refine,
+                             "pairs": n, "wall_s_per_pair": round((time.perf_counter() - t) / n, 3),
+                             "cpu_s_per_pair": round((time.process_time() - c) / n, 3)})
+            before = len(rows)
+            bench(rows, variants, ctx.quick)
+            bench_store(rows, variants)
+            for r in rows[before:]:
+                r["figure"] = f"refine_speed_{r['figure']}"
+                r["refine"] = refine

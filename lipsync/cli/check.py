@@ -31,6 +31,8 @@ def run(args: argparse.Namespace) -> int:
         worst = max(float(abs(symmetric_lines(bank.lines[v], bank.line_names, axis) - bank.lines[v]).max())
                     for v in bank.names)
         print(f"  symmetry on: axis x = {axis}, lines move by at most {worst:.2f} px when normalised")
+    print("  flows refined by optical flow (refine: true)" if bank.refine else
+          "  flows from the control lines alone (refine: false)")
     store = FlowStore.for_bank(bank, args.store)
     pairs = all_pairs(bank.names)
     axis = bank_axis(bank) if bank.symmetry else None
