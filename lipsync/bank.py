@@ -38,6 +38,7 @@ import numpy as np
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
+from . import _yaml
 from .errors import BankError
 
 #: Refuse images above this many pixels (8K UHD): a decompression bomb or a mistake, and
@@ -409,8 +410,9 @@ def _parse_yaml_text(text: str, yaml_path: Path):
         # Found by fuzzing: libyaml's composer recurses on the C stack and segfaults on ~50,000
         # nested "[" or "- " (100 kB); such text goes to the Python loader, whose RecursionError
         # is caught below.
-        fast = getattr(yaml, "CSafeLoader", None)
-        loader = (fast if fast is not None and _yaml_depth(text) <= _C_LOADER_MAX_DEPTH else yaml.SafeLoader)(text)
+        # A key given twice (a viseme, a line) is refused, naming both lines (lipsync._yaml).
+        fast = _yaml.CSafeLoader
+        loader = (fast if fast is not None and _yaml_depth(text) <= _C_LOADER_MAX_DEPTH else _yaml.SafeLoader)(text)
         try:
             root = loader.get_single_node()
             data = loader.construct_document(root) if root is not None else None
