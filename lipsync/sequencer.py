@@ -45,7 +45,7 @@ from typing import Iterable, List, Optional, Sequence, Tuple, Union
 import numpy as np
 
 from .errors import InputError
-from .timeline import VISEME, Segment, Timeline
+from .timeline import MAX_TIMELINE_S, VISEME, Segment, Timeline
 from .timing import DEFAULT_CURVE, Curve, get_curve
 
 # --- tuning constants (seconds) -------------------------------------------------------------
@@ -143,6 +143,8 @@ def frame_count(duration: float, fps: float) -> int:
     """
     # Times like 1.358685 s * 25 fps carry float noise; a product within 1e-9 of an integer
     # is that integer, so a 2.0 s timeline never gets a 49th frame at 24 fps.
+    if not duration <= MAX_TIMELINE_S:  # also NaN; an infinite product cannot become an int
+        raise InputError(f"duration {duration:g} s is not within the limit of {MAX_TIMELINE_S:g} s (24 hours)")
     return max(0, int(math.ceil(duration * fps - 1e-9)))
 
 

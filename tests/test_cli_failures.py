@@ -376,12 +376,15 @@ def test_unknown_method_or_format(bank, tmp_path, capsys, option, value):
 CHILD_MEMORY_LIMIT = 3 << 30
 
 
-@pytest.mark.parametrize("name, text", [
-    ("huge.dat", "MohoSwitch1\n1 X\n1000000000 A\n"),                 # frame 10^9 at 24 fps
-    ("huge.phn", "0 1600 h#\n1600 100000000000000 aa\n"),              # 10^14 samples at 16 kHz
-    ("huge.tsv", "0.00\tX\n0.50\tB\n1e12\tX\n"),                       # a cue at 10^12 s
+@pytest.mark.parametrize("name, text, expect", [
+    # past 24 hours (MAX_TIMELINE_S): the reader refuses the line holding the number
+    ("huge.dat", "MohoSwitch1\n1 X\n1000000000 A\n", ":3: "),          # frame 10^9 at 24 fps
+    ("huge.phn", "0 1600 h#\n1600 100000000000000 aa\n", ":2: "),       # 10^14 samples at 16 kHz
+    ("huge.tsv", "0.00\tX\n0.50\tB\n1e12\tX\n", ":3: "),                # a cue at 10^12 s
+    # under 24 hours but over the sequencer's MAX_FRAMES at 25 fps (2 million frames)
+    ("long.tsv", "0.00\tX\n0.50\tB\n80000\tX\n", "frames"),
 ])
-def test_absurdly_long_timelines_are_refused_without_allocating(bank, tmp_path, name, text):
+def test_absurdly_long_timelines_are_refused_without_allocating(bank, tmp_path, name, text, expect):
     import resource
 
     timeline = tmp_path / name
@@ -394,7 +397,7 @@ def test_absurdly_long_timelines_are_refused_without_allocating(bank, tmp_path, 
     result = subprocess.run([sys.executable, "-m", "lipsync", *render_args(bank, out, timeline)],
                             capture_output=True, text=True, timeout=CMD_TIMEOUT_S, preexec_fn=cap_memory)
     assert result.returncode == 2, result.stderr[-800:]
-    assert str(timeline) in result.stderr and "frames" in result.stderr and "limit" in result.stderr
+    assert str(timeline) in result.stderr and expect in result.stderr and "limit" in result.stderr
     assert sorted(os.listdir(tmp_path)) == [name]
 
 
