@@ -71,7 +71,7 @@ _ARC_SAMPLES = 256
 class WarpParams(BaseModel):
     """Beier–Neely weight parameters: ``weight = (length**p / (a + dist))**b``."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)  # NaN: "finite number", not a range
     a: float = Field(1.0, gt=0, le=1e4)
     b: float = Field(2.0, gt=0, le=8)
     p: float = Field(0.5, ge=0, le=2)

@@ -152,7 +152,7 @@ def write_cues(cues: Union[Timeline, Sequence[Cue]], path: PathLike, format: Opt
     3 AI
     5 rest
     """
-    from ..store import atomic_write_bytes
+    from .._files import atomic_write_bytes
 
     name = format_for(path) if format is None else format
     writer = WRITERS.get(name)
