@@ -121,6 +121,37 @@ def _tap(p, px, py, xmax, ymax):  # pragma: no cover - compiled
             + p[y1, x0] * ((64 - ux) * uy) + p[y1, x1] * (ux * uy))
 
 
+@_nb.njit(inline="always", fastmath=True, boundscheck=False)
+def _row_displacements(da, db, y, by0, bx0, bh, bw, inv, rx0, rowbuf, rowfull):  # pragma: no cover - compiled
+    """Row y's displacements (ax, ay, bx, by per pixel of the ROI) into ``rowfull``."""
+    hc = da.shape[0]
+    wc = da.shape[1]
+    yl = y - by0
+    if hc > 0 and yl >= 0 and yl < bh:
+        cy = (np.float32(yl) + np.float32(0.5)) * inv - np.float32(0.5)
+        cy = min(max(cy, np.float32(0.0)), np.float32(hc - 1))
+        i0 = int(cy)
+        fy = cy - np.float32(i0)
+        i1 = np.uint64(min(i0 + 1, hc - 1))
+        i0 = np.uint64(i0)
+        for j in range(wc):
+            for c in range(2):
+                rowbuf[j, c] = da[i0, j, c] + fy * (da[i1, j, c] - da[i0, j, c])
+                rowbuf[j, 2 + c] = db[i0, j, c] + fy * (db[i1, j, c] - db[i0, j, c])
+        for xl in range(bw):
+            cx = (np.float32(xl) + np.float32(0.5)) * inv - np.float32(0.5)
+            cx = min(max(cx, np.float32(0.0)), np.float32(wc - 1))
+            j0 = int(cx)
+            fx = cx - np.float32(j0)
+            j1 = np.uint64(min(j0 + 1, wc - 1))
+            j0 = np.uint64(j0)
+            o = np.uint64(xl + bx0 - rx0)
+            for c in range(4):
+                rowfull[o, c] = rowbuf[j0, c] + fx * (rowbuf[j1, c] - rowbuf[j0, c])
+    else:
+        rowfull[:, :] = 0.0
+
+
 @_nb.njit(cache=True, nogil=True, fastmath=True, boundscheck=False)
 def warp_blend(pa, pb, da, db, by0, bx0, bh, bw, step, ry0, ry1, rx0, rx1, ka, out,
                        rowbuf, rowfull):  # pragma: no cover - compiled
@@ -134,8 +165,6 @@ def warp_blend(pa, pb, da, db, by0, bx0, bh, bw, step, ry0, ry1, rx0, rx1, ka, o
     """
     H = pa.shape[0]
     W = pa.shape[1]
-    hc = da.shape[0]
-    wc = da.shape[1]
     kb = 4096 - ka
     xmax = (W - 1) * 64
     ymax = (H - 1) * 64
@@ -144,30 +173,7 @@ def warp_blend(pa, pb, da, db, by0, bx0, bh, bw, step, ry0, ry1, rx0, rx1, ka, o
     rw = rx1 - rx0
     rowfull[:rw, :] = 0.0
     for y in range(ry0, ry1):
-        yl = y - by0
-        if hc > 0 and yl >= 0 and yl < bh:
-            cy = (np.float32(yl) + np.float32(0.5)) * inv - np.float32(0.5)
-            cy = min(max(cy, np.float32(0.0)), np.float32(hc - 1))
-            i0 = int(cy)
-            fy = cy - np.float32(i0)
-            i1 = np.uint64(min(i0 + 1, hc - 1))
-            i0 = np.uint64(i0)
-            for j in range(wc):
-                for c in range(2):
-                    rowbuf[j, c] = da[i0, j, c] + fy * (da[i1, j, c] - da[i0, j, c])
-                    rowbuf[j, 2 + c] = db[i0, j, c] + fy * (db[i1, j, c] - db[i0, j, c])
-            for xl in range(bw):
-                cx = (np.float32(xl) + np.float32(0.5)) * inv - np.float32(0.5)
-                cx = min(max(cx, np.float32(0.0)), np.float32(wc - 1))
-                j0 = int(cx)
-                fx = cx - np.float32(j0)
-                j1 = np.uint64(min(j0 + 1, wc - 1))
-                j0 = np.uint64(j0)
-                o = np.uint64(xl + bx0 - rx0)
-                for c in range(4):
-                    rowfull[o, c] = rowbuf[j0, c] + fx * (rowbuf[j1, c] - rowbuf[j0, c])
-        else:
-            rowfull[:rw, :] = 0.0
+        _row_displacements(da, db, y, by0, bx0, bh, bw, inv, rx0, rowbuf, rowfull[:rw])
         fyy = np.float32(y)
         for o in range(rw):
             x = rx0 + o
@@ -178,6 +184,48 @@ def warp_blend(pa, pb, da, db, by0, bx0, bh, bw, step, ry0, ry1, rx0, rx1, ka, o
             out[y, x, 0] = ((acc_a & m) * ka + (acc_b & m) * kb + 8388608) >> 24
             out[y, x, 1] = (((acc_a >> 21) & m) * ka + ((acc_b >> 21) & m) * kb + 8388608) >> 24
             out[y, x, 2] = (((acc_a >> 42) & m) * ka + ((acc_b >> 42) & m) * kb + 8388608) >> 24
+
+
+@_nb.njit(cache=True, nogil=True, fastmath=True, boundscheck=False)
+def warp_blend_rgba(pa, pb, aa, ab, da, db, by0, bx0, bh, bw, step, ry0, ry1, rx0, rx1, ka, out,
+                    rowbuf, rowfull):  # pragma: no cover - compiled
+    """:func:`warp_blend` for RGBA: ``pa``, ``pb`` packed premultiplied colours, ``aa``, ``ab``
+    alpha planes (int64); ``out`` gets straight RGBA, colour = premultiplied sum * 255 / alpha."""
+    H = pa.shape[0]
+    W = pa.shape[1]
+    kb = 4096 - ka
+    xmax = (W - 1) * 64
+    ymax = (H - 1) * 64
+    inv = np.float32(1.0 / step)
+    m = np.int64(2097151)
+    rw = rx1 - rx0
+    rowfull[:rw, :] = 0.0
+    for y in range(ry0, ry1):
+        _row_displacements(da, db, y, by0, bx0, bh, bw, inv, rx0, rowbuf, rowfull[:rw])
+        fyy = np.float32(y)
+        for o in range(rw):
+            x = rx0 + o
+            fxx = np.float32(x)
+            ax = fxx + rowfull[o, 0]
+            ay = fyy + rowfull[o, 1]
+            bx = fxx + rowfull[o, 2]
+            by = fyy + rowfull[o, 3]
+            acc_a = _tap(pa, ax, ay, xmax, ymax)
+            acc_b = _tap(pb, bx, by, xmax, ymax)
+            # alpha and the premultiplied colours in 1/4096^2; straight colour = c * 255 / alpha
+            alpha = _tap(aa, ax, ay, xmax, ymax) * ka + _tap(ab, bx, by, xmax, ymax) * kb
+            out[y, x, 3] = (alpha + 8388608) >> 24
+            if alpha > 0:
+                half = alpha >> 1
+                out[y, x, 0] = min(((acc_a & m) * ka + (acc_b & m) * kb) * 255 + half, 255 * alpha) // alpha
+                out[y, x, 1] = min((((acc_a >> 21) & m) * ka + ((acc_b >> 21) & m) * kb) * 255 + half,
+                                   255 * alpha) // alpha
+                out[y, x, 2] = min((((acc_a >> 42) & m) * ka + ((acc_b >> 42) & m) * kb) * 255 + half,
+                                   255 * alpha) // alpha
+            else:
+                out[y, x, 0] = 0
+                out[y, x, 1] = 0
+                out[y, x, 2] = 0
 
 
 # int32 values keep the arithmetic in 32 bits (numba would widen to int64 around Python

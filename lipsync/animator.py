@@ -144,7 +144,7 @@ class Animator:
             raise IndexError(f"frame {index} out of range 0..{len(self.specs) - 1}")
         spec = self.specs[index]
         if out is None:
-            out = np.empty(self.renderer.shape + (3,), np.uint8)
+            out = np.empty(self.renderer.shape + (self.renderer.channels,), np.uint8)
         return self.renderer.render(spec.from_viseme, spec.to_viseme, spec.alpha, out=out)
 
     def same_as_previous(self, index: int) -> bool:

@@ -29,7 +29,7 @@ PathLike = Union[str, "os.PathLike[str]"]
 #: The fields a row may have, and why each is there.
 FIELDS = {
     "input": "timeline file in any format a reader takes (audio too, where a reader takes it, with text)",
-    "output": "file name under OUTDIR (.mp4, .mov, .mkv); subfolders allowed",
+    "output": "file name under OUTDIR (.mp4, .mkv, .webm, .mov, .webp, .gif); subfolders allowed",
     "bank": "viseme bank folder (default: the shipped toon)",
     "text": "transcript for audio input: the text itself, or a file holding it",
     "audio": "speech to mux into the video",
@@ -284,8 +284,9 @@ def read_manifest(path: PathLike, outdir: Optional[PathLike] = None) -> List[Cli
                 out_name = output_name(out)
                 if out_name.endswith(SIDECAR_SUFFIX):
                     raise ValueError(f"output {out!r} ends with {SIDECAR_SUFFIX}, the sidecar suffix")
-                if format_for(out_name) != "mp4":
-                    raise ValueError(f"output {out!r}: batch writes video files (.mp4, .mov, .mkv)")
+                if format_for(out_name) == "png":  # one file per clip: every format but a PNG folder
+                    raise ValueError(f"output {out!r}: batch writes video files (.mp4, .mkv, .webm, .mov, "
+                                     f".webp, .gif)")
                 if out_real is not None:
                     real = (out_real / out_name).resolve()
                     if out_real not in real.parents:

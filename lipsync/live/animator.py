@@ -280,12 +280,13 @@ class LiveAnimator:
         return self.spec(self.index(t))
 
     def frame(self, n: int, *, out: Optional[np.ndarray] = None) -> np.ndarray:
-        """Frame ``n`` as RGB ``uint8`` (a new array unless ``out`` is given)."""
+        """Frame ``n`` as RGB ``uint8`` (RGBA for a transparent bank; a new array unless ``out`` is given)."""
         spec = self.spec(n)
         return self.renderer.render(spec.from_viseme, spec.to_viseme, spec.alpha, out=out)
 
     def frame_at(self, t: float, *, out: Optional[np.ndarray] = None) -> np.ndarray:
-        """The frame for playback time ``t`` seconds, RGB ``uint8`` ``(H, W, 3)``.
+        """The frame for playback time ``t`` seconds, RGB ``uint8`` ``(H, W, 3)`` (RGBA ``(H, W, 4)``
+        for a bank with transparency).
 
         Uses only what has been pushed; past the data the head holds, then rests. Never
         raises for a number (a negative time is frame 0, a huge or infinite one rest); a
