@@ -25,7 +25,7 @@ import os
 import re
 import shutil
 from pathlib import Path
-from typing import Callable, List, Union
+from typing import Callable, List, Tuple, Union
 
 PathLike = Union[str, "os.PathLike[str]"]
 
@@ -64,8 +64,11 @@ def partial_name(out: PathLike, suffix: str = "") -> str:
     return f".{os.path.basename(os.fspath(out))}{PARTIAL}{os.getpid()}{suffix}"
 
 
-def remove_stale_partials(out: PathLike) -> List[Path]:
+def remove_stale_partials(out: PathLike, tags: Tuple[str, ...] = ("partial",)) -> List[Path]:
     """Delete ``.NAME.partial-PID*`` files and folders beside ``out`` whose process is gone.
+
+    ``tags``: the words between the name and the pid (an encoder's two-pass video file is
+    ``.NAME.video-PID.mp4``).
 
     Returns what was removed. Partials of live processes (another render of the same
     ``OUT`` running now) and every other file are left alone; errors are ignored (this is
@@ -83,7 +86,8 @@ def remove_stale_partials(out: PathLike) -> List[Path]:
     1
     """
     out = Path(os.fspath(out))
-    pattern = re.compile(re.escape(f".{out.name}{PARTIAL}") + r"(\d+)(?:[-.].*)?$", re.S)
+    words = "|".join(re.escape(t) for t in tags)
+    pattern = re.compile(re.escape(f".{out.name}.") + f"(?:{words})-" + r"(\d+)(?:[-.].*)?$", re.S)
     removed: List[Path] = []
     try:
         entries = list(out.parent.iterdir())
