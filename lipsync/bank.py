@@ -39,7 +39,9 @@ import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
 from . import _yaml
-from .errors import BankError
+from .coarticulation import DominanceOverrides, DominanceParams
+from .errors import BankError, InputError
+from .timing import check_timing
 
 if TYPE_CHECKING:  # pragma: no cover
     from .composite import Composite
@@ -100,8 +102,23 @@ class _BankSpec(BaseModel):
     rest: str
     warp: WarpParams = WarpParams()
     symmetry: bool = False
+    # How this subject's mouth moves when a render does not say (lipsync.timing): a curve
+    # name or "dominance"; banks made from video set "dominance" (issue 21).
+    timing: Optional[str] = None
+    # The dominance model's constants fitted to this speaker (lipsync.coarticulation).
+    coarticulation: Optional[DominanceOverrides] = None
     visemes: Dict[str, _VisemeSpec]
     composite: Optional[_CompositeSpec] = None
+
+    @field_validator("timing")
+    @classmethod
+    def _known_timing(cls, v):
+        if v is not None:
+            try:
+                return check_timing(v)
+            except InputError as exc:
+                raise ValueError(exc.reason) from None
+        return v
 
     @field_validator("visemes")
     @classmethod
@@ -279,6 +296,12 @@ class Bank:
         For mouth sprites: the body image they are drawn on and where
         (``composite: {image: body.png, at: [x, y], scale: s}``: the mouth image's centre
         lands on body pixel (x, y), scaled by s; see :mod:`lipsync.composite`).
+    timing : str or None
+        bank.yaml's ``timing``: how this subject's mouth moves when a render does not say
+        (a timing curve name or ``dominance``; see :func:`lipsync.coarticulation.resolve_timing`).
+    coarticulation : DominanceParams or None
+        bank.yaml's ``coarticulation``: the dominance model's constants fitted to this
+        speaker (keys it leaves out keep :data:`lipsync.coarticulation.DEFAULT_PARAMS`).
 
     Examples
     --------
@@ -299,6 +322,8 @@ class Bank:
     lines: Dict[str, np.ndarray] = field(repr=False)
     features: Dict[str, Dict[str, Feature]] = field(default_factory=dict, repr=False)
     composite: Optional["Composite"] = field(default=None, repr=False)
+    timing: Optional[str] = None
+    coarticulation: Optional[DominanceParams] = field(default=None, repr=False)
 
     @property
     def feature_names(self) -> Tuple[str, ...]:
@@ -825,4 +850,5 @@ def _build(root, data, folder: Path, yaml_path: Path, image_cache) -> Bank:
 
     return Bank(path=folder, name=spec.name, rest=spec.rest, warp=spec.warp, symmetry=spec.symmetry,
                 names=names, line_names=tuple(line_names), images=images, lines=lines, features=features,
-                composite=composite)
+                composite=composite, timing=spec.timing,
+                coarticulation=spec.coarticulation.apply() if spec.coarticulation is not None else None)

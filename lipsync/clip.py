@@ -26,7 +26,6 @@ import time
 from dataclasses import dataclass
 from typing import Optional, Union
 
-from .timing import DEFAULT_CURVE
 
 PathLike = Union[str, "os.PathLike[str]"]
 
@@ -175,7 +174,7 @@ def render_parallel(render_into, n: int, shape, write, *, threads: Optional[int]
 
 
 def render_clip(timeline, output: PathLike, *, bank=None, audio: Optional[PathLike] = None,
-                fps: float = DEFAULT_FPS, map=None, method: str = "flow", timing=DEFAULT_CURVE,
+                fps: float = DEFAULT_FPS, map=None, method: str = "flow", timing=None,
                 format: Optional[str] = None, crf: int = DEFAULT_CRF, preset: str = DEFAULT_PRESET,
                 store=None, jobs: Optional[int] = None, quiet: bool = False,
                 timeline_options=None, progress=None, background=None, composite=None) -> ClipReport:

@@ -35,7 +35,7 @@ FIELDS = {
     "audio": "speech to mux into the video",
     "fps": "frames per second (default: 25)",
     "map": "phoneme map: a shipped name or a YAML file",
-    "timing": "transition timing curve name",
+    "timing": "timing name: a transition curve or dominance (default: the bank's, else sqrt-fast-middle)",
     "method": "in-between method name",
 }
 REQUIRED = ("input", "output")
@@ -219,7 +219,7 @@ def read_manifest(path: PathLike, outdir: Optional[PathLike] = None) -> List[Cli
     from ..phonemes import DEFAULT_MAP, MAPS, load_map
     from ..render import METHODS
     from ..sequencer import check_fps
-    from ..timing import CURVES, DEFAULT_CURVE
+    from ..timing import CURVES, MODELS, timing_names
 
     path = Path(path)
     try:
@@ -340,9 +340,9 @@ def read_manifest(path: PathLike, outdir: Optional[PathLike] = None) -> List[Cli
                 if map_ok[candidate] is not None:
                     errs.append(f"map {map_value!r}: {map_ok[candidate]}")
                 map_file = candidate
-        timing = field("timing") or DEFAULT_CURVE
-        if timing not in CURVES:
-            errs.append(f"timing {timing!r}: unknown; valid: {', '.join(CURVES.names())}")
+        timing = field("timing") or ""   # empty: the bank's timing (bank.yaml), else the default curve
+        if timing and not (timing in CURVES or timing in MODELS):
+            errs.append(f"timing {timing!r}: unknown; valid: {', '.join(timing_names())}")
         method = field("method") or "flow"
         if method not in METHODS:
             errs.append(f"method {method!r}: unknown; valid: {', '.join(METHODS.names())}")

@@ -91,8 +91,13 @@ def _corr(a: np.ndarray, b: np.ndarray) -> float:
 METHODS = ("flow morph", "hard cuts", "still")
 
 
-def judge_clip(bank, clip: str, mesh=None) -> Dict[str, Dict[str, np.ndarray]]:
+def judge_clip(bank, clip: str, mesh=None, *, timing=None, methods=METHODS) -> Dict[str, Dict[str, np.ndarray]]:
     """One held-out sentence rendered three ways, measured against its real frames.
+
+    ``timing`` is the Animator's (default: the bank's); ``methods`` chooses which of
+    :data:`METHODS` to render (the coarticulation figure renders each timing model's flow
+    morph). The sentence's alignment is :func:`lipsync.bench.grid.alignment_of` (computed
+    once per clip, as :meth:`lipsync.Animator.from_audio` would).
 
     Returns
     -------
@@ -110,16 +115,15 @@ def judge_clip(bank, clip: str, mesh=None) -> Dict[str, Dict[str, np.ndarray]]:
     mesh = mesh or FaceMesh()
     real = list(read_video(grid.video(clip)))
     real_track = grid.track(clip)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        anim = Animator.from_audio(bank, grid.video(clip), grid.transcript(clip), fps=real_track.fps)
+    anim = Animator(bank, grid.alignment_of(clip).phones, fps=real_track.fps, timing=timing)
     n = min(len(anim), len(real))
-    renders = {
-        "flow morph": [anim.frame(i) for i in range(n)],
-        "hard cuts": [anim.renderer.render(s.from_viseme, s.to_viseme, float(round(s.alpha))).copy()
-                      for s in anim.specs[:n]],
-        "still": [anim.renderer.nb.images[bank.rest]] * n,
+    makers = {
+        "flow morph": lambda: [anim.frame(i) for i in range(n)],
+        "hard cuts": lambda: [anim.renderer.render(s.from_viseme, s.to_viseme, float(round(s.alpha))).copy()
+                              for s in anim.specs[:n]],
+        "still": lambda: [anim.renderer.nb.images[bank.rest]] * n,
     }
+    renders = {m: makers[m]() for m in methods}
     out = {"real": {"open": M.lip_opening(real_track.points[:n])}, "specs": anim.specs[:n]}
     shape = real[0].shape[:2]
     for method, frames in renders.items():

@@ -36,7 +36,6 @@ from pathlib import Path
 from typing import Optional
 
 from ..errors import InputError, check_number
-from ..timing import DEFAULT_CURVE
 
 STATIC = Path(__file__).resolve().parent / "static"
 SAMPLES = Path(__file__).resolve().parents[2] / "samples"
@@ -75,7 +74,7 @@ class ServeConfig:
     bank: Optional[str] = None
     store: Optional[str] = None
     map: Optional[str] = None
-    timing: str = DEFAULT_CURVE
+    timing: Optional[str] = None     # None: the bank's timing (bank.yaml), else the default curve
     method: str = "flow"
     fps: float = 25.0
     quality: int = DEFAULT_QUALITY
