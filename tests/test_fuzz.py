@@ -174,6 +174,7 @@ SEED_FILES: Dict[str, List[Path]] = {
     "rhubarb-json": _files("tests/data/timelines/rhubarb_*.json"),
     "rhubarb-xml": _files("tests/data/timelines/rhubarb_*.xml"),
     "moho": _files("tests/data/timelines/*.dat"),
+    "pgo": _files("tests/data/conformance/papagayo/*.pgo", "tests/data/timelines/papagayo_*.pgo"),
     "timit": _files("samples/*.phn", "tests/data/timelines/timit_*.PHN", "tests/data/timelines/timit_*.phn"),
     # (samples/record-script.txt is text to read aloud, not a label track)
     "audacity": [p for p in _files("samples/*.txt", "tests/data/timelines/audacity_*.txt")
@@ -194,12 +195,12 @@ ALL_SEEDS: List[bytes] = [b for bs in SEEDS.values() for b in bs] + [p.read_byte
 #: Extensions and aliases each format is documented to answer to (lipsync/readers/*).
 EXTENSIONS = {"textgrid": [".TextGrid", ".textgrid"], "gentle": [".json"], "rhubarb-tsv": [".tsv"],
               "rhubarb-json": [".json"], "rhubarb-xml": [".xml"], "moho": [".dat"],
-              "timit": [".phn", ".PHN"], "audacity": [".txt", ".labels"],
+              "pgo": [".pgo"], "timit": [".phn", ".PHN"], "audacity": [".txt", ".labels"],
               "polly": [".marks", ".jsonl"], "azure": [".json"], "whisper": [".json"], "elevenlabs": [".json"],
               "audio": [".wav", ".flac", ".mp3", ".m4a", ".ogg"], "grid": [".align"]}
 ALIASES = {"textgrid": ["praat", "mfa", "TextGrid"], "gentle": ["GENTLE"], "rhubarb-tsv": ["tsv"],
            "rhubarb-json": ["Rhubarb-JSON"], "rhubarb-xml": ["xml"], "moho": ["dat", "papagayo"],
-           "timit": ["phn"], "audacity": ["labels"],
+           "pgo": ["papagayo-ng", "papagayo-project"], "timit": ["phn"], "audacity": ["labels"],
            "polly": ["speech-marks"], "azure": ["azure-visemes"], "whisper": ["words", "whisper.cpp"],
            "elevenlabs": ["character-alignment"], "audio": ["AUDIO"], "grid": ["grid-align"]}
 ALL_EXTENSIONS = sorted({e for es in EXTENSIONS.values() for e in es}) + [".lab", ".bin", ".yaml", ""]
@@ -355,6 +356,32 @@ def gen_moho(draw) -> str:
     return "MohoSwitch1\n" + body
 
 
+PGO_LABELS = ["AI", "O", "E", "etc", "MBP", "rest", "NLTDR", "EHSZ", "A", "H", "AA", "K", "smile"]
+
+
+def gen_pgo(draw) -> str:
+    """A Papagayo project: voices of phrases of words of phonemes, counts sometimes wrong."""
+    fps = draw(st.sampled_from([24, 30]))
+
+    def count(n):
+        return number_text(draw, n + draw(st.sampled_from([0, 0, 0, 0, 1, -1])), integer=True)
+
+    out = ["lipsync version 1", "a.wav", number_text(draw, fps, integer=True)]
+    voices = draw(st.integers(0, 2))
+    out += [number_text(draw, 3 * fps, integer=True), count(voices)]
+    for v in range(voices):
+        out += [f"\tVoice {v}", "\ttext"]
+        rows = draw(intervals())
+        out += [count(1), "\t\ttext", "\t\t0", number_text(draw, 3 * fps, integer=True), count(len(rows))]
+        for s, e, _ in rows:
+            labels = draw(st.lists(st.one_of(st.sampled_from(PGO_LABELS), label_st), max_size=3))
+            out.append(f"\t\t\tw {number_text(draw, s * fps, integer=True)} "
+                       f"{number_text(draw, e * fps, integer=True)} {count(len(labels))}")
+            out += [f"\t\t\t\t{number_text(draw, s * fps + k, integer=True)} {lab or 'rest'}"
+                    for k, lab in enumerate(labels)]
+    return "\n".join(out) + "\n"
+
+
 def gen_audacity(draw) -> str:
     out = []
     for s, e, lab in draw(intervals()):
@@ -415,7 +442,7 @@ def gen_elevenlabs(draw) -> str:
 
 
 GENERATORS = {"textgrid": gen_textgrid, "gentle": gen_gentle, "rhubarb-tsv": gen_rhubarb_tsv,
-              "rhubarb-json": gen_rhubarb_json, "rhubarb-xml": gen_rhubarb_xml, "moho": gen_moho,
+              "rhubarb-json": gen_rhubarb_json, "rhubarb-xml": gen_rhubarb_xml, "moho": gen_moho, "pgo": gen_pgo,
               "timit": gen_timit, "audacity": gen_audacity,
               "polly": gen_polly, "azure": gen_azure, "whisper": gen_whisper, "elevenlabs": gen_elevenlabs}
 
@@ -579,6 +606,9 @@ ALLOC_LIMIT_BYTES = 4 << 20
 HUGE_CASES = {
     # Moho: a frame number of 10^k (1-based frames at 24 fps) must not make a per-frame array.
     "moho": lambda k: f"MohoSwitch1\n1 rest\n{10 ** k} AI\n{10 ** k + 5} rest\n",
+    # Papagayo: a frame number, and a count of phrases, of 10^k.
+    "pgo": lambda k: (f"lipsync version 1\na.wav\n24\n{10 ** k}\n1\n\tV\n\tt\n\t{10 ** k}\n\t\tt\n\t\t0\n"
+                      f"\t\t{10 ** k}\n\t\t1\n\t\t\tw 1 {10 ** k} 2\n\t\t\t\t1 AI\n\t\t\t\t{10 ** k} MBP\n"),
     # TIMIT: a sample count of 10^k.
     "timit": lambda k: f"0 {10 ** k} h#\n{10 ** k} {2 * 10 ** k} ay\n",
     "rhubarb-tsv": lambda k: f"0.00\tX\n1e{k}\tA\n2e{k}\tX\n",

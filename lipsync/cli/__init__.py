@@ -25,6 +25,7 @@ _COMMAND_MODULES = [
     "render",
     "align",
     "cues",
+    "atlas",
     "timeline",
     "init",
     "check",
@@ -92,7 +93,15 @@ def main(argv: Optional[List[str]] = None) -> int:
 
     argv = sys.argv[1:] if argv is None else list(argv)
     parser = build_parser(argv)
-    args = parser.parse_args(argv)
+    args, extra = parser.parse_known_args(argv)
+    # argparse takes a command's positionals in one run: `lipsync atlas BANK -o OUT T1 T2`
+    # would leave T1 T2 unrecognised. A command naming a list positional in
+    # ``extra_positionals`` gets them appended (options it does not know are still errors).
+    target = getattr(args, "extra_positionals", None)
+    if extra:
+        if target is None or any(e.startswith("-") for e in extra):
+            parser.parse_args(argv)  # argparse's own message and exit code 2
+        getattr(args, target).extend(extra)
     func: Callable[[argparse.Namespace], int] = args.func
     saved = warnings.formatwarning
     warnings.formatwarning = _format_warning

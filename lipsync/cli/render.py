@@ -16,7 +16,8 @@ def add_parser(sub) -> None:
                        description="Read a phoneme or viseme timeline, map it to visemes, sequence it and "
                                    "render every frame by morphing along the cached flows.")
     p.add_argument("timeline", metavar="TIMELINE", help="timeline file (.phn, .TextGrid, Gentle .json, "
-                                                        "Rhubarb .tsv/.json/.xml, Moho .dat, Audacity .txt), "
+                                                        "Rhubarb .tsv/.json/.xml, Moho .dat, Papagayo .pgo, "
+                                                        "Audacity .txt), "
                                                         "or speech audio (.wav, .mp3, ...: aligned, then "
                                                         "muxed; --text gives its transcript)")
     p.add_argument("-o", "--output", required=True, metavar="OUT",
