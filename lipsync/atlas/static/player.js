@@ -55,7 +55,9 @@
   function checkFrames(doc, atlas) {
     if (!doc || doc.format !== FRAMES_FORMAT) fail("not lipsync atlas frames (format " + FRAMES_FORMAT + ")");
     if (!Number.isInteger(doc.version) || doc.version > VERSION) fail("frames version " + doc.version + " is newer than this player");
-    if (!(doc.fps > 0) || !Array.isArray(doc.frames)) fail("frames.json needs fps and frames");
+    if (!(doc.fps > 0) || !Array.isArray(doc.frames) || doc.frames.length === 0) {
+      fail("frames.json needs fps and at least one frame");
+    }
     const bad = doc.frames.findIndex((c) => !Number.isInteger(c) || c < 0 || c >= atlas.cells.length);
     if (bad >= 0) fail("frame " + bad + " names cell " + doc.frames[bad] + ", which the atlas does not have");
     return doc;
