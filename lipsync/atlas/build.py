@@ -293,7 +293,7 @@ def write_atlas(built: AtlasBuild, output: PathLike) -> Atlas:
     """
     from dataclasses import replace
 
-    from ..store import atomic_write_bytes
+    from .._files import atomic_write_bytes
 
     out = Path(os.fspath(output))
     if out.suffix.lower() != ".png":

@@ -98,7 +98,7 @@ def run(args: argparse.Namespace) -> int:
     atlas = write_atlas(built, args.output)
     if args.player:
         from ..atlas import player_files
-        from ..store import atomic_write_bytes
+        from .._files import atomic_write_bytes
 
         for src in player_files():
             data = src.read_bytes()

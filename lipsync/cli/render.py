@@ -57,6 +57,9 @@ def run(args: argparse.Namespace) -> int:
     from ..clip import composite_from_options, load_background, render_clip
     from ..errors import InputError
 
+    from ..encode.mp4 import check_preset
+
+    check_preset(args.preset)  # before loading anything
     if args.mouth_only and (args.over or args.at or args.scale is not None):
         raise InputError("--mouth-only renders the mouth alone: it cannot be combined with --over/--at/--scale")
     background = load_background(args.background) if args.background is not None else None

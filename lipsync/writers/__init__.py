@@ -27,13 +27,12 @@ Examples
 
 from __future__ import annotations
 
-import math
 import os
 from pathlib import Path
 from typing import Iterable, List, Mapping, Optional, Sequence, Tuple, Union
 
 from ..errors import InputError
-from ..timeline import Segment, Timeline
+from ..timeline import MAX_TIMELINE_S, Segment, Timeline
 from ..timing import DEFAULT_CURVE
 from .base import DEFAULT_FPS, DEFAULT_TIER, WRITERS, Cue, CueOptions, PathLike, Writer
 
@@ -67,8 +66,8 @@ def cue_track(cues: Union[Timeline, Sequence[Cue]], *, rest: str,
         # Timeline checks order, overlap and finiteness once for both kinds of input.
         Timeline(tuple(Segment(a, b, v) for a, b, v in rows), kind="viseme")
         total = (rows[-1][1] if rows else 0.0) if duration is None else float(duration)
-    if not math.isfinite(total) or total < 0:
-        raise InputError(f"cue track duration {total!r} is not a finite, non-negative number")
+    if not 0 <= total <= MAX_TIMELINE_S:  # NaN and infinities fail too
+        raise InputError(f"cue track duration {total!r} is not a number of seconds within 0..{MAX_TIMELINE_S:g}")
     out: List[Cue] = []
     t = 0.0
     for start, end, label in rows:
@@ -167,7 +166,7 @@ def write_cues(cues: Union[Timeline, Sequence[Cue]], path: PathLike, format: Opt
     3 AI
     5 rest
     """
-    from ..store import atomic_write_bytes
+    from .._files import atomic_write_bytes
 
     name = format_for(path) if format is None else format
     writer = WRITERS.get(name)
