@@ -125,36 +125,6 @@ def pair_flows(shape: Tuple[int, ...], lines_a: np.ndarray, lines_b: np.ndarray,
     return forward, backward
 
 
-def bank_pair_flows(nb, a: str, b: str) -> Tuple[np.ndarray, np.ndarray, Optional[float]]:
-    """What a bank's store entry for the pair (a, b) holds: ``(forward, backward, axis)``.
-
-    The line flows of :func:`pair_flows` on the normalised bank ``nb``, refined by optical
-    flow (:func:`lipsync.refine.refine_pair`) unless the bank says ``refine: false``, and
-    the mirror axis to store them with (the bank's; refined flows of a symmetric bank are
-    made symmetric too). Every place that computes store entries (preprocess, the renderer
-    on a miss, the editor, batch workers) calls this.
-
-    Examples
-    --------
-    >>> from lipsync.bank import Bank
-    >>> from lipsync.normalise import normalise
-    >>> from lipsync._data import default_bank_dir
-    >>> nb = normalise(Bank.load(default_bank_dir()))
-    >>> fwd, bwd, axis = bank_pair_flows(nb, "X", "D")
-    >>> fwd.shape == nb.shape + (2,)
-    True
-    """
-    bank = nb.bank
-    forward, backward = pair_flows(nb.shape, nb.lines[a], nb.lines[b], bank.warp,
-                                   line_names=bank.line_names, axis=nb.axis)
-    if not bank.refine:
-        return forward, backward, nb.axis
-    from .refine import refine_pair
-
-    forward, backward = refine_pair(nb.images[a], nb.images[b], forward, backward, axis=nb.axis)
-    return forward, backward, nb.axis
-
-
 # --------------------------------------------------------------------------- inverse maps
 #
 # A frame at alpha needs, for every output pixel Y, the X with X + t F(X) = Y (t = alpha for

@@ -28,7 +28,7 @@ from typing import List, Optional, Tuple
 import numpy as np
 
 from .bank import Bank
-from .flows import bank_pair_flows
+from .flows import pair_flows
 from .normalise import NormalisedBank, normalise
 from .store import FlowStore
 
@@ -74,6 +74,34 @@ class PreprocessReport:
 def all_pairs(names) -> List[Tuple[str, str]]:
     """Unordered pairs in bank order: (A, B) with A before B."""
     return [(names[i], names[j]) for i in range(len(names)) for j in range(i + 1, len(names))]
+
+
+def bank_pair_flows(nb: NormalisedBank, a: str, b: str) -> Tuple[np.ndarray, np.ndarray, Optional[float]]:
+    """What a bank's store entry for the pair (a, b) holds: ``(forward, backward, axis)``.
+
+    The line flows of :func:`lipsync.flows.pair_flows` on the normalised bank ``nb``, refined by optical
+    flow (:func:`lipsync.refine.refine_pair`) unless the bank says ``refine: false``, and
+    the mirror axis to store them with (the bank's; refined flows of a symmetric bank are
+    made symmetric too). Every place that computes store entries (preprocess, the renderer
+    on a miss, the editor, batch workers) calls this.
+
+    Examples
+    --------
+    >>> from lipsync._data import default_bank_dir
+    >>> nb = normalise(Bank.load(default_bank_dir()))
+    >>> fwd, bwd, axis = bank_pair_flows(nb, "X", "D")
+    >>> fwd.shape == nb.shape + (2,)
+    True
+    """
+    bank = nb.bank
+    forward, backward = pair_flows(nb.shape, nb.lines[a], nb.lines[b], bank.warp,
+                                   line_names=bank.line_names, axis=nb.axis)
+    if not bank.refine:
+        return forward, backward, nb.axis
+    from .refine import refine_pair
+
+    forward, backward = refine_pair(nb.images[a], nb.images[b], forward, backward, axis=nb.axis)
+    return forward, backward, nb.axis
 
 
 def _compute_pair(root: str, key: str, nb: NormalisedBank, a: str, b: str) -> str:

@@ -54,7 +54,7 @@ import numpy as np
 from .alpha import blend_premultiplied, premultiply, unpremultiply
 from .bank import Bank
 from .errors import InputError
-from .flows import bank_pair_flows
+from .preprocess import bank_pair_flows
 from .normalise import NormalisedBank, normalise
 from .registry import Registry
 from .store import Crop, FlowStore, InverseTables, StoredField, StoreWarning, pack_pair, union_box, unpack_pair

@@ -50,6 +50,11 @@ def banks(workdir: Path):
     toon = workdir / "toon"
     shutil.copytree(ROOT / "visemes" / "toon", toon, ignore=shutil.ignore_patterns("store", ".lipsync*"))
     ellipse = synthetic.write_bank(workdir / "ellipse")
+    # refine: false -- the hashes were taken before refined flows (issue 22) existed, and what
+    # they prove (transparency changed no opaque frame) is about the renderer, not the flows
+    for folder in (toon, ellipse):
+        y = folder / "bank.yaml"
+        y.write_text(y.read_text().replace("\nvisemes:", "\nrefine: false\nvisemes:", 1))
     return {"toon": Bank.load(toon), "ellipse": Bank.load(ellipse)}
 
 

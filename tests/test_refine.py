@@ -17,7 +17,8 @@ import pytest
 from lipsync import refine as R
 from lipsync.bank import Bank
 from lipsync.errors import BankError
-from lipsync.flows import bank_pair_flows, pair_flows
+from lipsync.flows import pair_flows
+from lipsync.preprocess import bank_pair_flows
 from lipsync.normalise import normalise
 from lipsync.store import FlowStore
 
@@ -49,21 +50,23 @@ def _moved(image, motion):
 
 
 def test_refinement_finds_the_motion_the_lines_miss():
-    # A textured picture whose middle moves 3 px right and 1.5 px down under a smooth bump;
-    # the "lines" know only half of that motion. The refined flow must land much nearer the
-    # truth, both ways, and leave the still border exactly as the lines had it.
+    # A textured picture whose middle moves 6 px right and 3 px down under a smooth bump;
+    # the "lines" know only half of that motion. Where they move (fully refined where they
+    # move 2.25 px or more) the refined flow must land much nearer the truth, both ways, and
+    # the still border must stay exactly as the lines had it.
     h, w = 96, 128
     a = _texture(h, w)
     yy, xx = np.mgrid[0:h, 0:w].astype(np.float32)
     bump = np.exp(-(((xx - 64) / 22) ** 2 + ((yy - 48) / 16) ** 2))
-    truth = np.dstack([3.0 * bump, 1.5 * bump]).astype(np.float32)
+    truth = np.dstack([6.0 * bump, 3.0 * bump]).astype(np.float32)
     b = _moved(a, truth)
     lines_f = (0.5 * truth).astype(np.float32)
     lines_f[np.hypot(lines_f[..., 0], lines_f[..., 1]) < 0.05] = 0.0   # motion only where the lines move
     lines_b = (-0.5 * truth).astype(np.float32)
     lines_b[np.hypot(lines_b[..., 0], lines_b[..., 1]) < 0.05] = 0.0
     fwd, bwd = R.refine_pair(a, b, lines_f, lines_b)
-    centre = (slice(32, 64), slice(40, 88))
+    centre = R.moving_mask(lines_f, lines_b) == 1.0
+    assert centre.sum() > 400
     before = np.abs(lines_f - truth)[centre].mean()
     after = np.abs(fwd - truth)[centre].mean()
     assert after < before / 3, (before, after)
@@ -177,9 +180,9 @@ def _summary(s):
 
 
 def test_real_inbetweens_tracked_lines(grid_tracks, tmp_path):
-    # Three GRID clips, pairs k = 2, 4, 6 apart: 27 real frames. Measured: flow 33.98 dB,
+    # Three GRID clips, pairs k = 2, 4, 6 apart: 27 real frames. Measured: flow 33.97 dB,
     # classic Beier-Neely 33.84, the line flow alone 33.74, dissolve 32.23, cut 31.07;
-    # flow closer than Beier-Neely on 67 % of the frames.
+    # flow closer than Beier-Neely on 63 % of the frames (SSIM 0.929 against 0.927).
     from lipsync.bench.inbetween import run
 
     judged = run(list(grid_tracks), tracks=grid_tracks, folder=tmp_path, lines="track")
@@ -189,9 +192,10 @@ def test_real_inbetweens_tracked_lines(grid_tracks, tmp_path):
 
 def test_real_inbetweens_lines_from_lipsync_init(grid_tracks, tmp_path):
     # The same frames as photos in a folder, lines placed by lipsync init (its own mesh on
-    # each picture). Measured (k = 4): flow 33.5 dB against Beier-Neely 33.3.
+    # each picture). Measured: flow 33.96 dB, Beier-Neely 33.82, the line flow alone 33.73;
+    # flow closer on 63 % of the frames.
     from lipsync.bench.inbetween import run
 
-    judged = run(list(grid_tracks), tracks=grid_tracks, folder=tmp_path, lines="init", ks=(4,))
-    assert len(judged) == 9
+    judged = run(list(grid_tracks), tracks=grid_tracks, folder=tmp_path, lines="init")
+    assert len(judged) == 27
     _check_real(judged, _summary)

@@ -10,9 +10,8 @@ import numpy as np
 import pytest
 
 from lipsync.bank import Bank
-from lipsync.flows import bank_pair_flows
 from lipsync.normalise import normalise
-from lipsync.preprocess import all_pairs, preprocess
+from lipsync.preprocess import all_pairs, bank_pair_flows, preprocess
 from lipsync.render import Renderer
 from lipsync.store import FlowStore, StoreWarning, _read_flat_entry, apply_deadzone
 

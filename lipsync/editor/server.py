@@ -198,7 +198,7 @@ class FlowWorker:
         return True
 
     def _run(self) -> None:
-        from ..flows import bank_pair_flows
+        from ..preprocess import bank_pair_flows
 
         while True:
             with self._cond:
