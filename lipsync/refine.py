@@ -19,11 +19,11 @@ against what was tried beside it:
    red-green opponent channel (CIELAB a*) amplified. Lips are redder than the skin around
    them more than they are darker: on GRID's speaker the upper lip's edge has 1.5-3x the
    contrast in this channel that it has in luma (+0.07 dB over matching on grey).
-3. **Only where the lines move** (:func:`moving_mask`): the correction fades out where
-   the line flows move less than the store's dead zone, so still parts of the picture stay
-   exactly still, the moving box the renderer redraws does not grow (a reach of 8 px beyond
-   it made no difference on real faces and grew the toon's by a third), and a drawing's
-   flat background is never "matched" against itself.
+3. **Only where the lines move** (:func:`moving_mask`): the correction is weighted by how
+   far the line flows move there, from nothing below the store's dead zone to all of it at
+   2.25 px, so still parts of the picture stay exactly still, the region the renderer
+   redraws (and an atlas crops) does not grow, and a drawing's flat colour is not
+   "matched" where the lines keep it nearly still.
 4. **The two directions made to agree**: each flow is averaged with the inverse of the other
    (:func:`inverse_field`, Newton's method). Refined independently, the two flows disagree
    by a fraction of a pixel, and an in-between blends two pictures that are not quite on top
