@@ -27,7 +27,7 @@ import numpy as np
 from .bank import Bank
 from .phonemes import DEFAULT_MAP, PhonemeMap, bank_viseme_timeline, load_map
 from .render import Renderer
-from .sequencer import FrameSpec, check_fps, sequence
+from .sequencer import DEFAULT_FPS, FrameSpec, check_fps, sequence
 from .store import FlowStore
 from .timeline import Timeline, read_timeline
 from .timing import DEFAULT_CURVE
@@ -64,7 +64,7 @@ class Animator:
         The mapped viseme timeline.
     """
 
-    def __init__(self, bank: Union[Bank, str, "os.PathLike[str]"], timeline, fps: float = 25, *,
+    def __init__(self, bank: Union[Bank, str, "os.PathLike[str]"], timeline, fps: float = DEFAULT_FPS, *,
                  map: Union[str, "os.PathLike[str]", PhonemeMap, None] = None, method: str = "flow",
                  timing=DEFAULT_CURVE, store: Optional[FlowStore] = None, timeline_options=None):
         self.bank = bank if isinstance(bank, Bank) else Bank.load(bank)
@@ -85,7 +85,7 @@ class Animator:
 
     @classmethod
     def from_audio(cls, bank: Union[Bank, str, "os.PathLike[str]"], audio, text: Optional[str] = None,
-                   fps: float = 25, **kwargs) -> "Animator":
+                   fps: float = DEFAULT_FPS, **kwargs) -> "Animator":
         """An Animator for a speech recording: aligned with pocketsphinx, then as usual.
 
         Parameters

@@ -29,7 +29,7 @@ import numpy as np
 from ..bank import Bank
 from ..errors import InputError, TimelineError
 from ..phonemes import DEFAULT_MAP, PhonemeMap, bank_viseme_timeline, check_map_against, load_map
-from ..sequencer import FrameSpec
+from ..sequencer import DEFAULT_FPS, FrameSpec
 from ..store import FlowStore
 from ..timeline import PHONEME, VISEME, Segment, Timeline
 from ..timing import DEFAULT_CURVE
@@ -91,7 +91,7 @@ class LiveAnimator:
     is pushed before the first frame, every frame equals the offline Animator's.
     """
 
-    def __init__(self, bank: Union[Bank, str, "os.PathLike[str]"], fps: float = 25, *,
+    def __init__(self, bank: Union[Bank, str, "os.PathLike[str]"], fps: float = DEFAULT_FPS, *,
                  map: Union[str, "os.PathLike[str]", PhonemeMap, None] = None, timing=DEFAULT_CURVE,
                  method: str = "flow", lookahead: Optional[float] = None, store: Optional[FlowStore] = None,
                  renderer: Optional[RendererPool] = None, prepare: Optional[bool] = None):

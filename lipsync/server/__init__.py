@@ -36,6 +36,7 @@ from pathlib import Path
 from typing import Optional
 
 from ..errors import InputError
+from ..sequencer import DEFAULT_FPS
 from ..timing import DEFAULT_CURVE
 
 STATIC = Path(__file__).resolve().parent / "static"
@@ -70,7 +71,7 @@ class ServeConfig:
     map: Optional[str] = None
     timing: str = DEFAULT_CURVE
     method: str = "flow"
-    fps: float = 25.0
+    fps: float = DEFAULT_FPS
     quality: int = DEFAULT_QUALITY
     max_sessions: int = DEFAULT_MAX_SESSIONS
     idle_timeout: float = DEFAULT_IDLE_TIMEOUT_S
