@@ -258,3 +258,30 @@ def test_grid_another_sentences_transcript_is_reported_with_a_low_confidence(gri
         al, warned = align_recording(audio, " ".join(other))
         assert warned and al.confidence < LOW_CONFIDENCE, (name, other, al.confidence)
         assert f"confidence {al.confidence:.2f}" in str(warned[-1].message)
+
+
+def test_grid_words_stay_when_the_phone_pass_fails(monkeypatch):
+    # the words a transcript's grammar found are never given up: had the phone pass failed
+    # (it did on five GRID sentences before issue 20), the words keep the grammar's times
+    # and share them among their phones
+    import lipsync.speech.align as A
+
+    real = A._aligner()
+
+    class NoPhonePass:
+        def __getattr__(self, name):
+            return getattr(real, name)
+
+        def set_alignment(self, *args):
+            raise RuntimeError("Failed to set up sub-word alignment")
+
+    monkeypatch.setattr(A, "_aligner", lambda: NoPhonePass())
+    name, audio, rows, words = next(s for s in grid_sentences() if s[0] == "bram2n")
+    al, warned = align_recording(audio, " ".join(words))
+    assert al.words.labels() == words and not al.recognised and not warned
+    ref = [r for r in rows if r[2] not in GRID_SILENCE]
+    assert max(abs(s.start - r[0]) for s, r in zip(al.words, ref)) < 0.08
+    # "bin" = B IH N within the word's time, in order
+    first = [p for p in al.phones if al.words[0].start <= p.start < al.words[0].end]
+    assert [re.sub(r"\d", "", p.label) for p in first] == ["B", "IH", "N"]
+    assert first[0].start == al.words[0].start and first[-1].end == al.words[0].end

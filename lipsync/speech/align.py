@@ -4,7 +4,8 @@ The stages, each a function over plain values::
 
     load_audio -> _frame_energy -> [_plan_chunks: cut at the quietest places]
     -> per chunk: [_recognise] or [_fitting_words] -> _force_align (words, then phones)
-    -> Alignment (words and phones timelines over the whole audio)
+    -> [_phone_loop_scores -> _acoustic_fit: does the transcript fit?]
+    -> _cap_pause_closures -> Alignment (words and phones timelines over the whole audio)
 
 * With a transcript, the words are normalised (:func:`normalise_transcript`), words the
   dictionary lacks get a pronunciation from :func:`pronounce` (listed in one warning), and
@@ -14,9 +15,11 @@ The stages, each a function over plain values::
   state-level second pass places the phones inside the words found.
 * How well the transcript fits is measured against what the audio holds without it: the
   acoustic score of the aligned words per frame against a free phone loop's over the same
-  frames (:func:`_acoustic_fit`). A transcript that fits keeps its alignment whatever the
-  score (the confidence figure says how well); only one that really does not fit (no path,
-  or a fit below :data:`NOT_FIT_CONFIDENCE`) goes the relaxed way below.
+  frames (:func:`_acoustic_fit`). A transcript that aligns keeps its alignment, and the
+  confidence figure says how well it fits; only one that really does not fit (no path, or
+  a fit below :data:`NOT_FIT_CONFIDENCE`) goes the relaxed way below. (Recordings longer
+  than :data:`MAX_CHUNK_S` are judged by the share of their words found instead: the phone
+  loop would double their CPU time.)
 * Without one, the words are recognised first with pocketsphinx's US-English language
   model (in chunks of :data:`RECOGNITION_CHUNK_S`, in worker processes when there are
   several), then their phones are aligned inside the recognised word boundaries.
