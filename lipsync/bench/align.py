@@ -3,7 +3,8 @@
 On the MFA corpus recording (``ctx.mfa/acoustic_corpus.wav``, 26.7 s of real speech):
 
 1. speed as a multiple of real time, with the .lab transcript and without (recognition
-   first), wall clock and CPU (this process and its workers), median of repeats;
+   first), wall clock and CPU (this process and its workers), median of repeats; with the
+   transcript also the share of that CPU time the fit check's phone loop takes;
 2. accuracy against MFA's own ``phones`` tier: share of MFA's phones matched (difflib's
    matching blocks of the labels), mean absolute boundary error of matched phones, and the share of
    10 ms frames showing the same Rhubarb mouth shape (both mapped with english-to-rhubarb);
@@ -131,6 +132,12 @@ def _align(ctx: Context, rows: List[dict]) -> None:
                          "phones_matched_%": round(100 * matched, 1), "mean_abs_boundary_ms": round(1000 * mae, 1),
                          "median_signed_ms": round(1000 * bias, 1),
                          "same_mouth_shape_frames_%": round(100 * frame_agreement(al.phones, ref, ref.duration), 1)})
+            if transcript is not None:
+                # the share of that CPU time spent on the fit check's free phone loop (issue 20)
+                from ..speech.align import _dither, _phone_loop_scores
+
+                _, _, loop_cpu = _timed(lambda: _phone_loop_scores(_dither(pcm)), repeat)
+                rows[-1]["fit_check_cpu_%"] = round(100 * loop_cpu / cpu)
         samples = Path(__file__).resolve().parents[2] / "samples"
         for name in ("hello", "balloons"):
             if not (samples / f"{name}.wav").is_file():
