@@ -29,7 +29,7 @@ _EXPORTS = {
     "MapError": "errors",
     "Segment": "timeline",
     "Timeline": "timeline",
-    "read_timeline": "timeline",
+    "read_timeline": "readers",
     "PhonemeMap": "phonemes",
     "load_map": "phonemes",
     "map_timeline": "phonemes",
@@ -42,7 +42,7 @@ _EXPORTS = {
     "LiveAnimator": "live",
 }
 _SUBMODULES = {"warp", "bank", "normalise", "flows", "store", "render", "timeline", "phonemes",
-               "sequencer", "timing", "encode", "animator", "registry", "errors", "cli", "preview", "clip", "live"}
+               "sequencer", "timing", "coarticulation", "encode", "animator", "registry", "errors", "cli", "preview", "clip", "live"}
 
 
 def __getattr__(name: str) -> Any:

@@ -9,7 +9,6 @@ compiled kernel's, see lipsync.render and lipsync.yuv.
 import numba as _nb
 import numpy as np
 
-from .yuv import _CHALF as _CHALF_INT, _COEFFICIENTS, _SHIFT, _YHALF as _YHALF_INT
 
 
 @_nb.njit(cache=True, nogil=True, fastmath=True, boundscheck=False)
@@ -122,6 +121,37 @@ def _tap(p, px, py, xmax, ymax):  # pragma: no cover - compiled
             + p[y1, x0] * ((64 - ux) * uy) + p[y1, x1] * (ux * uy))
 
 
+@_nb.njit(inline="always", fastmath=True, boundscheck=False)
+def _row_displacements(da, db, y, by0, bx0, bh, bw, inv, rx0, rowbuf, rowfull):  # pragma: no cover - compiled
+    """Row y's displacements (ax, ay, bx, by per pixel of the ROI) into ``rowfull``."""
+    hc = da.shape[0]
+    wc = da.shape[1]
+    yl = y - by0
+    if hc > 0 and yl >= 0 and yl < bh:
+        cy = (np.float32(yl) + np.float32(0.5)) * inv - np.float32(0.5)
+        cy = min(max(cy, np.float32(0.0)), np.float32(hc - 1))
+        i0 = int(cy)
+        fy = cy - np.float32(i0)
+        i1 = np.uint64(min(i0 + 1, hc - 1))
+        i0 = np.uint64(i0)
+        for j in range(wc):
+            for c in range(2):
+                rowbuf[j, c] = da[i0, j, c] + fy * (da[i1, j, c] - da[i0, j, c])
+                rowbuf[j, 2 + c] = db[i0, j, c] + fy * (db[i1, j, c] - db[i0, j, c])
+        for xl in range(bw):
+            cx = (np.float32(xl) + np.float32(0.5)) * inv - np.float32(0.5)
+            cx = min(max(cx, np.float32(0.0)), np.float32(wc - 1))
+            j0 = int(cx)
+            fx = cx - np.float32(j0)
+            j1 = np.uint64(min(j0 + 1, wc - 1))
+            j0 = np.uint64(j0)
+            o = np.uint64(xl + bx0 - rx0)
+            for c in range(4):
+                rowfull[o, c] = rowbuf[j0, c] + fx * (rowbuf[j1, c] - rowbuf[j0, c])
+    else:
+        rowfull[:, :] = 0.0
+
+
 @_nb.njit(cache=True, nogil=True, fastmath=True, boundscheck=False)
 def warp_blend(pa, pb, da, db, by0, bx0, bh, bw, step, ry0, ry1, rx0, rx1, ka, out,
                        rowbuf, rowfull):  # pragma: no cover - compiled
@@ -135,8 +165,6 @@ def warp_blend(pa, pb, da, db, by0, bx0, bh, bw, step, ry0, ry1, rx0, rx1, ka, o
     """
     H = pa.shape[0]
     W = pa.shape[1]
-    hc = da.shape[0]
-    wc = da.shape[1]
     kb = 4096 - ka
     xmax = (W - 1) * 64
     ymax = (H - 1) * 64
@@ -145,30 +173,7 @@ def warp_blend(pa, pb, da, db, by0, bx0, bh, bw, step, ry0, ry1, rx0, rx1, ka, o
     rw = rx1 - rx0
     rowfull[:rw, :] = 0.0
     for y in range(ry0, ry1):
-        yl = y - by0
-        if hc > 0 and yl >= 0 and yl < bh:
-            cy = (np.float32(yl) + np.float32(0.5)) * inv - np.float32(0.5)
-            cy = min(max(cy, np.float32(0.0)), np.float32(hc - 1))
-            i0 = int(cy)
-            fy = cy - np.float32(i0)
-            i1 = np.uint64(min(i0 + 1, hc - 1))
-            i0 = np.uint64(i0)
-            for j in range(wc):
-                for c in range(2):
-                    rowbuf[j, c] = da[i0, j, c] + fy * (da[i1, j, c] - da[i0, j, c])
-                    rowbuf[j, 2 + c] = db[i0, j, c] + fy * (db[i1, j, c] - db[i0, j, c])
-            for xl in range(bw):
-                cx = (np.float32(xl) + np.float32(0.5)) * inv - np.float32(0.5)
-                cx = min(max(cx, np.float32(0.0)), np.float32(wc - 1))
-                j0 = int(cx)
-                fx = cx - np.float32(j0)
-                j1 = np.uint64(min(j0 + 1, wc - 1))
-                j0 = np.uint64(j0)
-                o = np.uint64(xl + bx0 - rx0)
-                for c in range(4):
-                    rowfull[o, c] = rowbuf[j0, c] + fx * (rowbuf[j1, c] - rowbuf[j0, c])
-        else:
-            rowfull[:rw, :] = 0.0
+        _row_displacements(da, db, y, by0, bx0, bh, bw, inv, rx0, rowbuf, rowfull[:rw])
         fyy = np.float32(y)
         for o in range(rw):
             x = rx0 + o
@@ -181,20 +186,62 @@ def warp_blend(pa, pb, da, db, by0, bx0, bh, bw, step, ry0, ry1, rx0, rx1, ka, o
             out[y, x, 2] = (((acc_a >> 42) & m) * ka + ((acc_b >> 42) & m) * kb + 8388608) >> 24
 
 
-# int32 constants keep the arithmetic in 32 bits (numba would widen to int64 around
-# Python ints); with luma in its own row loop this measured 1.1 ms per 1280x720 frame
-# against 1.5 ms for one int64 loop over 2x2 blocks.
+@_nb.njit(cache=True, nogil=True, fastmath=True, boundscheck=False)
+def warp_blend_rgba(pa, pb, aa, ab, da, db, by0, bx0, bh, bw, step, ry0, ry1, rx0, rx1, ka, out,
+                    rowbuf, rowfull):  # pragma: no cover - compiled
+    """:func:`warp_blend` for RGBA: ``pa``, ``pb`` packed premultiplied colours, ``aa``, ``ab``
+    alpha planes (int64); ``out`` gets straight RGBA, colour = premultiplied sum * 255 / alpha."""
+    H = pa.shape[0]
+    W = pa.shape[1]
+    kb = 4096 - ka
+    xmax = (W - 1) * 64
+    ymax = (H - 1) * 64
+    inv = np.float32(1.0 / step)
+    m = np.int64(2097151)
+    rw = rx1 - rx0
+    rowfull[:rw, :] = 0.0
+    for y in range(ry0, ry1):
+        _row_displacements(da, db, y, by0, bx0, bh, bw, inv, rx0, rowbuf, rowfull[:rw])
+        fyy = np.float32(y)
+        for o in range(rw):
+            x = rx0 + o
+            fxx = np.float32(x)
+            ax = fxx + rowfull[o, 0]
+            ay = fyy + rowfull[o, 1]
+            bx = fxx + rowfull[o, 2]
+            by = fyy + rowfull[o, 3]
+            acc_a = _tap(pa, ax, ay, xmax, ymax)
+            acc_b = _tap(pb, bx, by, xmax, ymax)
+            # alpha and the premultiplied colours in 1/4096^2; straight colour = c * 255 / alpha
+            alpha = _tap(aa, ax, ay, xmax, ymax) * ka + _tap(ab, bx, by, xmax, ymax) * kb
+            out[y, x, 3] = (alpha + 8388608) >> 24
+            if alpha > 0:
+                half = alpha >> 1
+                out[y, x, 0] = min(((acc_a & m) * ka + (acc_b & m) * kb) * 255 + half, 255 * alpha) // alpha
+                out[y, x, 1] = min((((acc_a >> 21) & m) * ka + ((acc_b >> 21) & m) * kb) * 255 + half,
+                                   255 * alpha) // alpha
+                out[y, x, 2] = min((((acc_a >> 42) & m) * ka + ((acc_b >> 42) & m) * kb) * 255 + half,
+                                   255 * alpha) // alpha
+            else:
+                out[y, x, 0] = 0
+                out[y, x, 1] = 0
+                out[y, x, 2] = 0
+
+
+# int32 values keep the arithmetic in 32 bits (numba would widen to int64 around Python
+# ints); with luma in its own row loop this measured 1.1 ms per 1280x720 frame against 1.5
+# ms for one int64 loop over 2x2 blocks. The constants come from lipsync.yuv, as arguments
+# (the compiled kernel takes them the same way: one source, and no import of yuv here).
 _I = np.int32
-_C = tuple(_I(v) for v in _COEFFICIENTS)
-_YHALF = _I(_YHALF_INT)
-_CHALF = _I(_CHALF_INT)
-_S1, _S2 = _I(_SHIFT), _I(_SHIFT + 2)
 
 
 @_nb.njit(cache=True, nogil=True, boundscheck=False)
-def rgb_to_yuv420p(rgb, out):  # pragma: no cover - compiled
+def rgb_to_yuv420p(rgb, out, coefficients, yhalf, chalf, shift):  # pragma: no cover - compiled
     # Flat rows (3 bytes a pixel): twice as fast as indexing [x, channel] (2.35 ms -> 1.1).
-    yr, yg, yb, ur, ug, ub, vr, vg, vb = _C
+    # coefficients: 9 int32 (Y, U, V rows of R, G, B weights); yhalf, chalf, shift: int32.
+    s1 = shift
+    s2 = shift + _I(2)
+    yr, yg, yb, ur, ug, ub, vr, vg, vb = coefficients
     h, w = rgb.shape[0], rgb.shape[1]
     flat = rgb.reshape(h, w * 3)
     cw = w // 2
@@ -205,7 +252,7 @@ def rgb_to_yuv420p(rgb, out):  # pragma: no cover - compiled
         o = r * w
         for x in range(w):
             k = 3 * x
-            out[o + x] = np.uint8((yr * _I(row[k]) + yg * _I(row[k + 1]) + yb * _I(row[k + 2]) + _YHALF) >> _S1)
+            out[o + x] = np.uint8((yr * _I(row[k]) + yg * _I(row[k + 1]) + yb * _I(row[k + 2]) + yhalf) >> s1)
     for j in range(h // 2):
         a = flat[2 * j]
         b = flat[2 * j + 1]
@@ -214,5 +261,5 @@ def rgb_to_yuv420p(rgb, out):  # pragma: no cover - compiled
             rs = _I(a[k]) + _I(a[k + 3]) + _I(b[k]) + _I(b[k + 3])
             gs = _I(a[k + 1]) + _I(a[k + 4]) + _I(b[k + 1]) + _I(b[k + 4])
             bs = _I(a[k + 2]) + _I(a[k + 5]) + _I(b[k + 2]) + _I(b[k + 5])
-            out[u0 + j * cw + i] = np.uint8((ur * rs + ug * gs + ub * bs + _CHALF) >> _S2)
-            out[v0 + j * cw + i] = np.uint8((vr * rs + vg * gs + vb * bs + _CHALF) >> _S2)
+            out[u0 + j * cw + i] = np.uint8((ur * rs + ug * gs + ub * bs + chalf) >> s2)
+            out[v0 + j * cw + i] = np.uint8((vr * rs + vg * gs + vb * bs + chalf) >> s2)

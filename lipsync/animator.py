@@ -25,12 +25,14 @@ from typing import Iterator, List, Optional, Union
 import numpy as np
 
 from .bank import Bank
+from .coarticulation import resolve_timing, viseme_classes
 from .phonemes import DEFAULT_MAP, PhonemeMap, bank_viseme_timeline, load_map
+from .readers import read_timeline
 from .render import Renderer
-from .sequencer import DEFAULT_FPS, FrameSpec, check_fps, sequence
+from .frames import DEFAULT_FPS
+from .sequencer import FrameSpec, check_fps, sequence
 from .store import FlowStore
-from .timeline import Timeline, read_timeline
-from .timing import DEFAULT_CURVE
+from .timeline import Timeline
 
 
 class Animator:
@@ -48,8 +50,11 @@ class Animator:
         Phoneme-to-viseme map (default: the shipped English to Rhubarb-shapes map).
     method : str
         Renderer method: ``flow`` (default), ``splat``, ``beier-neely`` or ``dissolve``.
-    timing : str or callable
-        Transition timing curve (default: the paper's text reading, ``sqrt-fast-middle``).
+    timing : str, callable or DominanceParams, optional
+        How the mouth moves: a transition curve name (``lipsync.timing.CURVES``), a callable
+        curve, or ``"dominance"`` (coarticulation, :mod:`lipsync.coarticulation`). Default:
+        the bank's ``timing`` in bank.yaml, else the paper's text reading ``sqrt-fast-middle``
+        (:func:`lipsync.coarticulation.resolve_timing`).
     store : FlowStore, optional
         Flow store (default: the bank's). Missing flows are computed on first use.
     timeline_options : argparse.Namespace, optional
@@ -66,7 +71,7 @@ class Animator:
 
     def __init__(self, bank: Union[Bank, str, "os.PathLike[str]"], timeline, fps: float = DEFAULT_FPS, *,
                  map: Union[str, "os.PathLike[str]", PhonemeMap, None] = None, method: str = "flow",
-                 timing=DEFAULT_CURVE, store: Optional[FlowStore] = None, timeline_options=None):
+                 timing=None, store: Optional[FlowStore] = None, timeline_options=None):
         self.bank = bank if isinstance(bank, Bank) else Bank.load(bank)
         self.fps = check_fps(fps)
         if not isinstance(timeline, Timeline):
@@ -79,8 +84,9 @@ class Animator:
         map_path = map if isinstance(map, (str, os.PathLike)) and os.path.isfile(map) else None
         self.visemes, pmap = bank_viseme_timeline(timeline, pmap, self.bank.names, rest=self.bank.rest,
                                                   map_path=map_path)
-        self.specs: List[FrameSpec] = sequence(self.visemes, fps=self.fps, rest=self.bank.rest, timing=timing,
-                                               closures=pmap.closures)
+        self.timing = resolve_timing(timing, self.bank)
+        self.specs: List[FrameSpec] = sequence(self.visemes, fps=self.fps, rest=self.bank.rest, timing=self.timing,
+                                               closures=pmap.closures, classes=viseme_classes(pmap, self.bank.rest))
         self.renderer = Renderer(self.bank, method=method, store=store)
 
     @classmethod
@@ -142,7 +148,7 @@ class Animator:
             raise IndexError(f"frame {index} out of range 0..{len(self.specs) - 1}")
         spec = self.specs[index]
         if out is None:
-            out = np.empty(self.renderer.shape + (3,), np.uint8)
+            out = np.empty(self.renderer.shape + (self.renderer.channels,), np.uint8)
         return self.renderer.render(spec.from_viseme, spec.to_viseme, spec.alpha, out=out)
 
     def same_as_previous(self, index: int) -> bool:

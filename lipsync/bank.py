@@ -32,13 +32,18 @@ import os
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Dict, List, Optional, Tuple, Union
+from typing import TYPE_CHECKING, Dict, List, Optional, Tuple, Union
 
 import numpy as np
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
-from .errors import BankError
+from .coarticulation import DominanceOverrides, DominanceParams
+from .errors import BankError, InputError
+from .timing import check_timing
+
+if TYPE_CHECKING:  # pragma: no cover
+    from .composite import Composite
 
 #: Refuse images above this many pixels (8K UHD): a decompression bomb or a mistake, and
 #: each flow of such a size would need hundreds of MB.
@@ -83,13 +88,36 @@ class _VisemeSpec(BaseModel):
     lines: Dict[str, object]
 
 
+class _CompositeSpec(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    image: str
+    at: Tuple[float, float]
+    scale: float = 1.0
+
+
 class _BankSpec(BaseModel):
     model_config = ConfigDict(extra="forbid")
     name: str
     rest: str
     warp: WarpParams = WarpParams()
     symmetry: bool = False
+    # How this subject's mouth moves when a render does not say (lipsync.timing): a curve
+    # name or "dominance"; banks made from video set "dominance" (issue 21).
+    timing: Optional[str] = None
+    # The dominance model's constants fitted to this speaker (lipsync.coarticulation).
+    coarticulation: Optional[DominanceOverrides] = None
     visemes: Dict[str, _VisemeSpec]
+    composite: Optional[_CompositeSpec] = None
+
+    @field_validator("timing")
+    @classmethod
+    def _known_timing(cls, v):
+        if v is not None:
+            try:
+                return check_timing(v)
+            except InputError as exc:
+                raise ValueError(exc.reason) from None
+        return v
 
     @field_validator("visemes")
     @classmethod
@@ -253,13 +281,26 @@ class Bank:
     line_names : tuple of str
         Control line names, in one order shared by every viseme's ``lines`` array.
     images : dict
-        Viseme name -> RGB ``uint8`` ``(H, W, 3)`` image.
+        Viseme name -> RGB ``uint8`` ``(H, W, 3)`` image; or, when any image of the bank has
+        transparency, RGBA ``(H, W, 4)`` with straight alpha for every viseme (images without
+        an alpha channel get alpha 255). An RGBA file whose alpha is 255 everywhere loads as
+        RGB: an opaque bank is opaque however its files were saved (see :mod:`lipsync.alpha`).
     lines : dict
         Viseme name -> float64 ``(L, 2, 2)`` control lines in ``line_names`` order
         (curves already expanded into segments ``name#i``).
     features : dict
         Viseme name -> {feature name -> :class:`Feature`} as written in bank.yaml, in file
         order (for drawing and editing curves; empty for banks built by hand in code).
+    composite : lipsync.composite.Composite or None
+        For mouth sprites: the body image they are drawn on and where
+        (``composite: {image: body.png, at: [x, y], scale: s}``: the mouth image's centre
+        lands on body pixel (x, y), scaled by s; see :mod:`lipsync.composite`).
+    timing : str or None
+        bank.yaml's ``timing``: how this subject's mouth moves when a render does not say
+        (a timing curve name or ``dominance``; see :func:`lipsync.coarticulation.resolve_timing`).
+    coarticulation : DominanceParams or None
+        bank.yaml's ``coarticulation``: the dominance model's constants fitted to this
+        speaker (keys it leaves out keep :data:`lipsync.coarticulation.DEFAULT_PARAMS`).
 
     Examples
     --------
@@ -279,6 +320,9 @@ class Bank:
     images: Dict[str, np.ndarray] = field(repr=False)
     lines: Dict[str, np.ndarray] = field(repr=False)
     features: Dict[str, Dict[str, Feature]] = field(default_factory=dict, repr=False)
+    composite: Optional["Composite"] = field(default=None, repr=False)
+    timing: Optional[str] = None
+    coarticulation: Optional[DominanceParams] = field(default=None, repr=False)
 
     @property
     def feature_names(self) -> Tuple[str, ...]:
@@ -291,6 +335,19 @@ class Bank:
     def shape(self) -> Tuple[int, int]:
         """``(H, W)`` of every image."""
         return self.images[self.names[0]].shape[:2]  # type: ignore[return-value]
+
+    @property
+    def channels(self) -> int:
+        """3 for an opaque bank (RGB images), 4 for a bank with transparency (RGBA).
+
+        Examples
+        --------
+        >>> from lipsync._data import default_bank_dir
+        >>> Bank.load(default_bank_dir()).channels
+        3
+        """
+        img = self.images[self.names[0]]
+        return img.shape[2] if img.ndim == 3 else 1
 
     @property
     def yaml_path(self) -> Path:
@@ -472,13 +529,36 @@ def _read_image(path: Path, where: str, yaml_path: Path, line: Optional[int]) ->
     if img.dtype != np.uint8:
         # 16-bit PNGs: keep the high byte; the renderer works in 8 bits.
         img = (img >> 8).astype(np.uint8) if img.dtype == np.uint16 else img.astype(np.uint8)
+    if img.ndim == 3 and img.shape[2] == 2:  # grey + alpha
+        img = np.dstack([cv2.cvtColor(np.ascontiguousarray(img[..., 0]), cv2.COLOR_GRAY2BGR), img[..., 1]])
     if img.ndim == 2:
         img = cv2.cvtColor(img, cv2.COLOR_GRAY2RGB)
     elif img.shape[2] == 4:
-        img = cv2.cvtColor(img, cv2.COLOR_BGRA2RGB)
+        # Transparency is kept (issue 18); an alpha channel that is 255 everywhere is no
+        # transparency, and such a file loads as RGB like any opaque image.
+        opaque = cv2.minMaxLoc(np.ascontiguousarray(img[..., 3]))[0] == 255
+        img = cv2.cvtColor(img, cv2.COLOR_BGRA2RGB if opaque else cv2.COLOR_BGRA2RGBA)
     else:
         img = cv2.cvtColor(img, cv2.COLOR_BGR2RGB)
     return np.ascontiguousarray(img)
+
+
+def read_image(path: Path) -> np.ndarray:
+    """An image file as the bank loader reads it (RGB, or RGBA if it has transparency), with
+    the same limits; errors are :class:`~lipsync.errors.InputError` naming the file.
+
+    Examples
+    --------
+    >>> from lipsync._data import default_bank_dir
+    >>> read_image(default_bank_dir() / "X.png").shape
+    (512, 512, 3)
+    """
+    from .errors import InputError
+
+    try:
+        return _read_image(Path(path), str(path), Path(path), None)
+    except BankError as exc:
+        raise InputError(exc.reason.replace(f"{path}: ", "", 1), path=path) from None
 
 
 def _jpeg_size(path: Path) -> Optional[Tuple[int, int]]:
@@ -703,31 +783,41 @@ def _build(root, data, folder: Path, yaml_path: Path, image_cache) -> Bank:
         lines[v] = np.concatenate(parts, axis=0)
 
     folder_real = folder.resolve()
+
+    def inside(rel: str, what: str, keys: List[str]) -> Path:
+        """The resolved path of image ``rel``, which must stay inside the bank folder."""
+        if not rel or os.path.isabs(rel) or rel.startswith(("/", "\\")) or re.match(r"^[A-Za-z]:", rel):
+            fail(f"{what}: image path {rel!r} must be relative to the bank folder", keys)
+        try:
+            real = (folder / rel).resolve()
+        except (OSError, RuntimeError, ValueError):  # ValueError: a NUL byte in the path (fuzzing)
+            fail(f"{what}: cannot resolve image path {rel!r}", keys)
+        if folder_real != real and folder_real not in real.parents:
+            fail(f"{what}: image path {rel!r} leads outside the bank folder", keys)
+        return real
+
     images: Dict[str, np.ndarray] = {}
     shape = None
     for v in names:
         rel = spec.visemes[v].image
         keys = ["visemes", v, "image"]
         line = _yaml_line(root, keys)
-        if not rel or os.path.isabs(rel) or rel.startswith(("/", "\\")) or re.match(r"^[A-Za-z]:", rel):
-            fail(f"viseme {v!r}: image path {rel!r} must be relative to the bank folder", keys)
-        img_path = folder / rel
-        try:
-            real = img_path.resolve()
-        except (OSError, RuntimeError, ValueError):  # ValueError: a NUL byte in the path (fuzzing)
-            fail(f"viseme {v!r}: cannot resolve image path {rel!r}", keys)
-        if folder_real != real and folder_real not in real.parents:
-            fail(f"viseme {v!r}: image path {rel!r} leads outside the bank folder", keys)
+        real = inside(rel, f"viseme {v!r}", keys)
         if image_cache is not None and rel in image_cache:
             img = image_cache[rel]
         else:
             img = _read_image(real, f"viseme {v!r}", yaml_path, line)
         if shape is None:
             shape = img.shape
-        elif img.shape != shape:
+        elif img.shape[:2] != shape[:2]:
             fail(f"viseme {v!r}: image {rel!r} is {img.shape[1]}x{img.shape[0]} but "
                  f"{names[0]!r} is {shape[1]}x{shape[0]}; all images need one size", keys)
         images[v] = img
+    if any(img.shape[2] == 4 for img in images.values()):
+        # One layout for the whole bank: the opaque images get alpha 255.
+        import cv2
+
+        images = {v: img if img.shape[2] == 4 else cv2.cvtColor(img, cv2.COLOR_RGB2RGBA) for v, img in images.items()}
 
     h, w = shape[:2]  # type: ignore[index]
     for v in names:
@@ -740,5 +830,23 @@ def _build(root, data, folder: Path, yaml_path: Path, image_cache) -> Bank:
             n = line_names[bad[0]].partition("#")[0]
             fail(f"viseme {v!r}, line {n!r}: lies far outside the {w}x{h} image", ["visemes", v, "lines", n])
 
+    composite = None
+    if spec.composite is not None:
+        from .composite import Composite, check_placement
+
+        c = spec.composite
+        keys = ["composite", "image"]
+        real = inside(c.image, "composite", keys)
+        if image_cache is not None and c.image in image_cache:
+            body = image_cache[c.image]
+        else:
+            body = _read_image(real, "composite", yaml_path, _yaml_line(root, keys))
+        problem = check_placement(body.shape, c.at, c.scale)
+        if problem:
+            fail(f"composite ({c.image!r}): {problem}", ["composite", "scale" if "scale" in problem else "at"])
+        composite = Composite(image=body, at=(float(c.at[0]), float(c.at[1])), scale=float(c.scale), path=real)
+
     return Bank(path=folder, name=spec.name, rest=spec.rest, warp=spec.warp, symmetry=spec.symmetry,
-                names=names, line_names=tuple(line_names), images=images, lines=lines, features=features)
+                names=names, line_names=tuple(line_names), images=images, lines=lines, features=features,
+                composite=composite, timing=spec.timing,
+                coarticulation=spec.coarticulation.apply() if spec.coarticulation is not None else None)

@@ -1,10 +1,11 @@
-r"""One clip end to end: a timeline (or audio) and a bank in, an mp4 or PNG frames out.
+r"""One clip end to end: a timeline (or audio) and a bank in, a video, animation or PNG frames out.
 
 The stages in order (DESIGN.md), shared by ``lipsync render``, ``lipsync batch`` and
 ``lipsync serve`` so that every entry point makes the same file from the same inputs::
 
     Bank.load -> FlowStore -> Animator (read, map, sequence) -> preprocess (missing flows)
-    -> Renderer frames -> open_writer (ffmpeg) -> OUT (renamed into place when complete)
+    -> Renderer frames -> Compositor (body, background) -> open_writer (ffmpeg)
+    -> OUT (renamed into place when complete)
 
 Examples
 --------
@@ -25,8 +26,7 @@ import time
 from dataclasses import dataclass
 from typing import Optional, Union
 
-from .sequencer import DEFAULT_FPS  # noqa: F401  (the one default frame rate; clip.DEFAULT_FPS kept)
-from .timing import DEFAULT_CURVE
+from .frames import DEFAULT_FPS  # noqa: F401  (the one default frame rate; clip.DEFAULT_FPS kept)
 
 PathLike = Union[str, "os.PathLike[str]"]
 
@@ -112,7 +112,7 @@ QUEUE_FRAMES = 8
 
 
 def render_parallel(render_into, n: int, shape, write, *, threads: Optional[int] = None, progress=None,
-                    prepare=None, same_as_previous=None) -> None:
+                    prepare=None, same_as_previous=None, initial=None) -> None:
     """Render frames ``0..n-1`` on worker threads and ``write`` them in order from this one.
 
     ``render_into(i, buf)`` fills ``buf`` (a ``shape`` uint8 array) with frame i; it must be
@@ -128,6 +128,8 @@ def render_parallel(render_into, n: int, shape, write, *, threads: Optional[int]
     ``same_as_previous(i)``, if given, tells that frame i equals frame i - 1: it is not
     rendered again, the previous result is written again (a held mouth shape costs only
     the write). ``progress(done)``, if given, is called after each frame is written.
+    ``initial``, if given, is what every buffer holds before its first frame (a composite's
+    canvas: frames then only write the mouth's rectangle).
     """
     from concurrent.futures import ThreadPoolExecutor
 
@@ -137,7 +139,8 @@ def render_parallel(render_into, n: int, shape, write, *, threads: Optional[int]
     depth = max(QUEUE_FRAMES, 2 * threads)
     # frames that need rendering: the first, and every one that differs from its predecessor
     fresh = [i for i in range(n) if i == 0 or same_as_previous is None or not same_as_previous(i)]
-    free = [[np.empty(shape, np.uint8), None] for _ in range(min(depth + 1, len(fresh)))]
+    free = [[np.empty(shape, np.uint8) if initial is None else initial.copy(), None]
+            for _ in range(min(depth + 1, len(fresh)))]
     pending = {}
 
     def job(i, slot):
@@ -169,27 +172,29 @@ def render_parallel(render_into, n: int, shape, write, *, threads: Optional[int]
 
 
 def render_clip(timeline, output: PathLike, *, bank=None, audio: Optional[PathLike] = None,
-                fps: float = DEFAULT_FPS, map=None, method: str = "flow", timing=DEFAULT_CURVE,
+                fps: float = DEFAULT_FPS, map=None, method: str = "flow", timing=None,
                 format: Optional[str] = None, crf: int = DEFAULT_CRF, preset: str = DEFAULT_PRESET,
                 store=None, jobs: Optional[int] = None, quiet: bool = False,
-                timeline_options=None, progress=None) -> ClipReport:
-    """Render one clip to ``output`` (an mp4, or a folder of numbered PNGs).
+                timeline_options=None, progress=None, background=None, composite=None) -> ClipReport:
+    """Render one clip to ``output`` (a video, an animation, or a folder of numbered PNGs).
 
     Parameters
     ----------
     timeline : Timeline or path-like
         Any timeline the readers understand (see :func:`lipsync.read_timeline`).
     output : path-like
-        The mp4 file or PNG folder; written under a temporary name and renamed when
-        complete, so a failure or Ctrl-C leaves nothing there.
+        The video (.mp4, .webm, .mov, ...), animation (.webp, .gif) or PNG folder; written
+        under a temporary name and renamed when complete, so a failure or Ctrl-C leaves
+        nothing there.
     bank : Bank or path-like, optional
         The subject (default: the shipped toon).
     audio : path-like, optional
-        Speech to mux (mp4 only). Default: ``timeline`` itself when it is an audio file.
+        Speech to mux (formats with a sound track: mp4, webm, mov). Default: ``timeline``
+        itself when it is an audio file.
     fps, map, method, timing
         As for :class:`lipsync.Animator`.
     format : str, optional
-        ``mp4`` or ``png`` (default: from ``output``).
+        A :data:`lipsync.encode.ENCODERS` name (default: from ``output``).
     crf, preset
         x264 quality, and speed preset (x264's, or one of
         :data:`lipsync.encode.X264_PRESETS`).
@@ -205,6 +210,12 @@ def render_clip(timeline, output: PathLike, *, bank=None, audio: Optional[PathLi
     progress : callable, optional
         ``progress(done, total)`` after each frame is rendered (``lipsync serve`` reports
         job progress with it).
+    background : str, colour tuple or image, optional
+        Flatten transparency onto this (``--background``: a colour or an image file).
+        Formats without alpha (mp4) are flattened anyway, onto the body or white.
+    composite : lipsync.composite.Composite or False, optional
+        The body the mouth is drawn on (default: the bank's ``composite:``); False renders
+        the mouth alone.
 
     Returns
     -------
@@ -215,7 +226,8 @@ def render_clip(timeline, output: PathLike, *, bank=None, audio: Optional[PathLi
     from ._data import default_bank_dir
     from .animator import Animator
     from .bank import Bank
-    from .encode import format_for, open_writer
+    from .composite import Compositor
+    from .encode import ENCODERS, format_for, open_writer
     from .errors import InputError
     from .preprocess import all_pairs, preprocess
     from .store import FlowStore
@@ -224,8 +236,21 @@ def render_clip(timeline, output: PathLike, *, bank=None, audio: Optional[PathLi
     if not 0 <= crf <= 51:
         raise InputError(f"--crf must be 0..51, got {crf}")
     out_format = format or format_for(output)  # an unknown extension fails before any work
+    alpha_out = bool(ENCODERS.get(out_format).alpha)
+    if isinstance(background, str):
+        background = load_background(background)
     if not isinstance(bank, Bank):
         bank = Bank.load(bank or default_bank_dir())
+    if composite is None:
+        composite = bank.composite
+    compositor = Compositor((bank.shape[0], bank.shape[1]), bank.channels, composite=composite or None,
+                            background=background, alpha_out=alpha_out)
+    if compositor.flattened:
+        import warnings
+
+        warnings.warn(f"{output}: {out_format} has no alpha channel; the bank's transparency is flattened onto "
+                      f"{'the body' if composite else 'white'} (--background COLOR|IMAGE picks another; "
+                      f"webm, mov, png, webp and gif keep alpha)", stacklevel=2)
     if not isinstance(store, FlowStore):
         store = FlowStore.for_bank(bank, store)
     if audio is None and out_format != "png" and not hasattr(timeline, "segments"):
@@ -242,25 +267,111 @@ def render_clip(timeline, output: PathLike, *, bank=None, audio: Optional[PathLi
         nb = anim.renderer.nb
         if any(not store.pair_path(store.pair_key(bank, a, b, nb.axis)).exists() for a, b in all_pairs(bank.names)):
             preprocess(bank, store=store, jobs=jobs, quiet=quiet, normalised=nb)
-    h, w = anim.renderer.shape
+    h, w = compositor.shape
     t1 = time.perf_counter()
     n = len(anim)
     # beier-neely keeps whole-frame scratch in the renderer: one thread; the rest are thread-safe
     threads = 1 if anim.renderer.method == "beier-neely" else None
     anim.renderer.frame_threads = 1  # whole frames run in parallel instead
     encoder_threads = 1 if (os.cpu_count() or 1) <= SINGLE_ENCODER_THREAD_CORES else None
+    if compositor.passthrough:
+        render_into = lambda i, buf: anim.frame(i, out=buf)  # noqa: E731 - straight into the buffer
+    else:
+        import threading
+
+        import numpy as np
+
+        scratch = threading.local()  # each render thread its own mouth frame
+
+        def render_into(i, buf):
+            mouth = getattr(scratch, "frame", None)
+            if mouth is None:
+                mouth = scratch.frame = np.empty(anim.renderer.shape + (anim.renderer.channels,), np.uint8)
+            compositor.apply(anim.frame(i, out=mouth), buf)
     with open_writer(output, fps=fps, size=(w, h), format=out_format, audio=audio,
                      crf=crf, preset=preset, quiet=True, frames=n or None,
-                     threads=encoder_threads) as writer:
+                     threads=encoder_threads, channels=compositor.channels) as writer:
         with tqdm(total=n, desc="render", unit="frame", disable=quiet, leave=False) as bar:
             def on_frame(done: int) -> None:
                 bar.update(1)
                 if progress is not None:
                     progress(done, n)
 
-            render_parallel(lambda i, buf: anim.frame(i, out=buf), n, (h, w, 3), writer.write_prepared,
+            render_parallel(render_into, n, (h, w, compositor.channels), writer.write_prepared,
                             threads=threads, progress=on_frame, prepare=writer.prepare,
-                            same_as_previous=anim.same_as_previous)
+                            same_as_previous=anim.same_as_previous, initial=compositor.initial)
     t2 = time.perf_counter()
     return ClipReport(output=str(output), frames=len(anim), fps=float(fps), size=(w, h), method=method,
                       seconds_setup=t1 - t0, seconds_render=t2 - t1)
+
+
+# --------------------------------------------------------------------------- options
+
+def load_background(spec: str):
+    """``--background``: a colour (``white``, ``#rrggbb``, ``r,g,b``) or an image file.
+
+    Examples
+    --------
+    >>> load_background("#00ff00")
+    (0, 255, 0)
+    """
+    from .alpha import parse_colour
+    from .errors import InputError
+
+    colour = parse_colour(spec)
+    if colour is not None:
+        return colour
+    if not os.path.isfile(spec):
+        raise InputError("--background is neither a colour (a name, #rrggbb or r,g,b) nor an image file",
+                         path=spec)
+    from pathlib import Path
+
+    from .bank import read_image
+
+    return read_image(Path(spec))
+
+
+def composite_from_options(bank_composite, *, over=None, at=None, scale: Optional[float] = None):
+    """The composite ``lipsync render --over IMAGE --at X,Y --scale S`` asks for: each option
+    replaces that part of the bank's own ``composite:`` (if it has one).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from lipsync.composite import Composite
+    >>> body = np.zeros((50, 50, 3), np.uint8)
+    >>> composite_from_options(Composite(body, (10.0, 10.0)), at="20,30").at
+    (20.0, 30.0)
+    >>> composite_from_options(None) is None
+    True
+    """
+    from pathlib import Path
+
+    from .composite import Composite, check_placement, parse_at
+    from .errors import InputError
+
+    if over is None and at is None and scale is None:
+        return bank_composite
+    if over is None and bank_composite is None:
+        raise InputError("--at and --scale place the mouth on a body: give the body image with --over IMAGE "
+                         "(or a composite: block in bank.yaml)")
+    xy = parse_at(at) if isinstance(at, str) else at
+    if over is not None:
+        from .bank import read_image
+
+        path = Path(over)
+        if not path.is_file():
+            raise InputError("--over: body image not found", path=path)
+        image = read_image(path)
+        if xy is None:
+            if bank_composite is None:
+                raise InputError("--over needs --at X,Y: the body pixel where the mouth's centre goes", path=path)
+            xy = bank_composite.at
+        c = Composite(image, (float(xy[0]), float(xy[1])), 1.0 if scale is None and bank_composite is None
+                      else (scale if scale is not None else bank_composite.scale), path)
+    else:
+        c = bank_composite.replace(at=None if xy is None else (float(xy[0]), float(xy[1])), scale=scale)
+    problem = check_placement(c.image.shape, c.at, c.scale)
+    if problem:
+        raise InputError(f"--over/--at/--scale: {problem}", path=c.path)
+    return c

@@ -109,7 +109,8 @@ class NormalisedBank:
     bank : Bank
         The bank as loaded (original images and lines).
     images, lines : dict
-        Per viseme, the normalised RGB image and float64 ``(L, 2, 2)`` lines.
+        Per viseme, the normalised image (RGB, or straight RGBA for a bank with
+        transparency) and float64 ``(L, 2, 2)`` lines.
     axis : float or None
         The mirror axis when ``bank.symmetry``; None otherwise.
     """
@@ -185,6 +186,16 @@ def normalise_image(image: np.ndarray, lines: np.ndarray, target_lines: np.ndarr
     True
     """
     m = beier_neely_map(image.shape, dst_lines=target_lines, src_lines=lines, a=a, b=b, p=p)
+    if image.ndim == 3 and image.shape[2] == 4:
+        # RGBA: resampled premultiplied, so transparent pixels lend no colour to the edge
+        import cv2
+
+        from .alpha import warp_rgba
+
+        flags = {"linear": cv2.INTER_LINEAR, "nearest": cv2.INTER_NEAREST, "cubic": cv2.INTER_CUBIC}
+        if interpolation not in flags:
+            raise ValueError(f"unknown interpolation {interpolation!r}; valid: {', '.join(flags)}")
+        return warp_rgba(image, m, interpolation=flags[interpolation])
     return warp(image, m, interpolation=interpolation)
 
 

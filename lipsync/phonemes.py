@@ -513,7 +513,7 @@ def bank_viseme_timeline(timeline: Timeline, pmap: PhonemeMap, viseme_names: Opt
     Parameters
     ----------
     timeline : Timeline
-        As read by :func:`lipsync.timeline.read_timeline`.
+        As read by :func:`lipsync.readers.read_timeline`.
     pmap : PhonemeMap
         The phoneme-to-viseme map.
     viseme_names : iterable of str, optional

@@ -1,6 +1,8 @@
 """Pictures for people: control lines drawn over visemes, preview sheets and morph strips.
 
-Pure drawing on RGB ``uint8`` arrays; nothing here reads a bank.  Three uses:
+Pure drawing on RGB ``uint8`` arrays (or RGBA, straight alpha: a sheet or strip of images
+with transparency keeps it, with the lines, captions and gaps opaque); nothing here reads a
+bank.  Three uses:
 
 * :func:`draw_lines` — one image with its control lines, to check where lines sit;
 * :func:`preview_sheet` — every viseme of a bank with its lines, captioned, in one grid;
@@ -43,14 +45,26 @@ def _base_name(name: str) -> str:
 
 
 def _as_rgb(image, what: str = "image") -> np.ndarray:
+    """The image as uint8 RGB ``(H, W, 3)`` or RGBA ``(H, W, 4)`` (a grey image becomes RGB)."""
     a = np.asarray(image)
     if a.ndim == 2:
         a = np.repeat(a[:, :, None], 3, axis=2)
-    if a.ndim != 3 or a.shape[2] != 3 or a.shape[0] == 0 or a.shape[1] == 0:
-        raise ValueError(f"{what} must be an RGB array (H, W, 3), got shape {a.shape}")
+    if a.ndim != 3 or a.shape[2] not in (3, 4) or a.shape[0] == 0 or a.shape[1] == 0:
+        raise ValueError(f"{what} must be an RGB array (H, W, 3) or RGBA (H, W, 4), got shape {a.shape}")
     if a.dtype != np.uint8:
         a = np.clip(np.round(a.astype(np.float64)), 0, 255).astype(np.uint8)
     return a
+
+
+def _ink(colour, img: np.ndarray) -> tuple:
+    """A drawing colour for ``img``: opaque on RGBA (cv2 would draw alpha 0 with an RGB tuple)."""
+    return tuple(colour) + (255,) if img.shape[2] == 4 else tuple(colour)
+
+
+def _with_channels(img: np.ndarray, channels: int) -> np.ndarray:
+    if img.shape[2] == channels:
+        return img
+    return cv2.cvtColor(img, cv2.COLOR_RGB2RGBA)  # only ever RGB -> RGBA (opaque)
 
 
 def _as_line(name: str, line) -> np.ndarray:
@@ -107,8 +121,8 @@ def _scale_for(shape) -> float:
 def _text(img, s: str, org, scale: float, colour, *, outline=True):
     thick = max(1, round(scale * 2))
     if outline:
-        cv2.putText(img, s, org, FONT, scale, (0, 0, 0), thick + 2, cv2.LINE_AA)
-    cv2.putText(img, s, org, FONT, scale, colour, thick, cv2.LINE_AA)
+        cv2.putText(img, s, org, FONT, scale, _ink((0, 0, 0), img), thick + 2, cv2.LINE_AA)
+    cv2.putText(img, s, org, FONT, scale, _ink(colour, img), thick, cv2.LINE_AA)
 
 
 def draw_lines(image, lines: Mapping[str, object], *, labels: bool = True) -> np.ndarray:
@@ -158,7 +172,7 @@ def draw_lines(image, lines: Mapping[str, object], *, labels: bool = True) -> np
         return tuple(int(round(v * one)) for v in point)
 
     for name, shape in parsed.items():
-        col = colours[_base_name(name)]
+        col = _ink(colours[_base_name(name)], out)
         if shape.ndim == 3:  # a curve: its segments as one chain, small ticks at the joins
             chain = np.concatenate([shape[:, 0], shape[-1:, 1]])
             if len(chain) > 2:
@@ -206,6 +220,10 @@ def _resize_to_width(img: np.ndarray, width: int | None) -> tuple[np.ndarray, fl
     f = width / img.shape[1]
     h = max(1, round(img.shape[0] * f))
     interp = cv2.INTER_AREA if f < 1 else cv2.INTER_CUBIC
+    if img.shape[2] == 4:  # resampled premultiplied: no dark rim around transparency
+        from .alpha import resize_rgba
+
+        return resize_rgba(img, (width, h), interpolation=interp), f
     return cv2.resize(img, (width, h), interpolation=interp), f
 
 
@@ -216,15 +234,16 @@ def _grid(cells: list[list[np.ndarray | None]], *, top: int = 0, left: int = 0):
     ncols = max((len(r) for r in cells), default=0)
     H = top + GAP + len(cells) * (ch + GAP)
     W = left + GAP + ncols * (cw + GAP)
-    canvas = np.empty((H, W, 3), np.uint8)
-    canvas[:] = BACKGROUND
+    channels = max((c.shape[2] for row in cells for c in row if c is not None), default=3)
+    canvas = np.empty((H, W, channels), np.uint8)
+    canvas[:] = _ink(BACKGROUND, canvas)
     origins = []
     for r, row in enumerate(cells):
         for c, cell in enumerate(row):
             y, x = top + GAP + r * (ch + GAP), left + GAP + c * (cw + GAP)
             origins.append((y, x))
             if cell is not None:
-                canvas[y:y + cell.shape[0], x:x + cell.shape[1]] = cell
+                canvas[y:y + cell.shape[0], x:x + cell.shape[1]] = _with_channels(cell, channels)
     return canvas, origins, (ch, cw)
 
 
@@ -235,8 +254,8 @@ def _caption(img: np.ndarray, text: str) -> np.ndarray:
     (tw, _), _ = cv2.getTextSize(text, FONT, scale, thick)
     # The band's height comes from the font, not the text, so every caption is equally tall.
     (_, th), base = cv2.getTextSize("Ag", FONT, scale, thick)
-    band = np.empty((th + base + 10, img.shape[1], 3), np.uint8)
-    band[:] = BACKGROUND
+    band = np.empty((th + base + 10, img.shape[1], img.shape[2]), np.uint8)
+    band[:] = _ink(BACKGROUND, band)
     _text(band, text, ((img.shape[1] - tw) // 2, th + 5), scale, TEXT, outline=False)
     return np.concatenate([band, img], axis=0)
 
@@ -362,8 +381,8 @@ def save_png(path, rgb) -> None:
     ----------
     path : str or os.PathLike
         Destination; its folder must exist.
-    rgb : array_like, (H, W, 3) uint8
-        RGB image (a 2-D grey image is accepted).
+    rgb : array_like, (H, W, 3) or (H, W, 4) uint8
+        RGB image, or RGBA (written with its alpha); a 2-D grey image is accepted.
 
     Examples
     --------
@@ -374,7 +393,7 @@ def save_png(path, rgb) -> None:
     [0, 0, 255]
     """
     img = _as_rgb(rgb)
-    ok, data = cv2.imencode(".png", cv2.cvtColor(img, cv2.COLOR_RGB2BGR))
+    ok, data = cv2.imencode(".png", cv2.cvtColor(img, cv2.COLOR_RGBA2BGRA if img.shape[2] == 4 else cv2.COLOR_RGB2BGR))
     if not ok:
         raise ValueError(f"could not encode a {img.shape} image as PNG")
     path = os.fspath(path)

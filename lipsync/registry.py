@@ -80,6 +80,19 @@ class Registry(Generic[T]):
             )
         return self._entries[key]
 
+    def canonical(self, name: str) -> str:
+        """The registered name ``name`` (any case, or an alias) stands for; raises like :meth:`get`.
+
+        Examples
+        --------
+        >>> r = Registry("thing")
+        >>> _ = r.register("one", 1, aliases=("uno",))
+        >>> r.canonical("UNO")
+        'one'
+        """
+        self.get(name)
+        return self._resolve(name)  # type: ignore[return-value]
+
     def name_for_extension(self, ext: str) -> Optional[str]:
         """The name registered for a file extension (with dot, any case), or None."""
         return self._extensions.get(ext.lower())

@@ -30,6 +30,13 @@ Methods (registry :data:`METHODS`):
     Beier–Neely warp every frame. The quality reference and the speed baseline.
 ``dissolve``
     A cross-fade: the baseline any morph must beat.
+
+Transparency: a bank with transparency (:attr:`lipsync.Bank.channels` 4) renders RGBA
+``(H, W, 4)`` frames with straight alpha; every method resamples and blends premultiplied
+values (:mod:`lipsync.alpha`), so a morphing edge neither darkens nor takes the hidden
+colour of transparent pixels. The compiled kernel reads the premultiplied alpha in its
+fourth byte; the numba kernel reads it from a plane beside the packed colours. An opaque
+bank takes exactly the RGB path it always did (same frames, same speed).
 """
 
 from __future__ import annotations
@@ -43,6 +50,7 @@ from typing import Dict, Optional, Tuple
 import cv2
 import numpy as np
 
+from .alpha import blend as blend_rgba, premultiply, unpremultiply
 from .bank import Bank
 from .errors import InputError
 from .flows import pair_flows
@@ -137,15 +145,30 @@ _BLEND_ONE = 4096
 def pack_pixels(image: np.ndarray) -> np.ndarray:
     """RGB ``uint8`` ``(H, W, 3)`` -> int64 ``(H, W)``: R | G << 21 | B << 42 (the kernel's input).
 
+    (RGBA: the colours premultiplied by alpha, which :func:`pack_alpha` gives as a plane.)
+
     Examples
     --------
     >>> int(pack_pixels(np.array([[[1, 2, 3]]], np.uint8))[0, 0]) == 1 + (2 << 21) + (3 << 42)
     True
     """
+    if image.shape[2] == 4:
+        image = premultiply(image, dtype=np.uint8)
     p = image[..., 0].astype(np.int64)
     p |= image[..., 1].astype(np.int64) << _LANE
     p |= image[..., 2].astype(np.int64) << (2 * _LANE)
     return p
+
+
+def pack_alpha(image: np.ndarray) -> np.ndarray:
+    """RGBA ``uint8`` ``(H, W, 4)`` -> its alpha as int64 ``(H, W)`` (the numba kernel's RGBA input).
+
+    Examples
+    --------
+    >>> pack_alpha(np.array([[[9, 9, 9, 7]]], np.uint8)).tolist()
+    [[7]]
+    """
+    return image[..., 3].astype(np.int64)
 
 
 def pack_rgbx(image: np.ndarray) -> np.ndarray:
@@ -153,7 +176,8 @@ def pack_rgbx(image: np.ndarray) -> np.ndarray:
 
     The compiled kernel's input: one 4-byte load per tap, and the extra row and column let
     the second taps of a pixel at the last row or column be read without a bounds test
-    (their weight is zero there).
+    (their weight is zero there). RGBA ``(H, W, 4)``: premultiplied R | G << 8 | B << 16 |
+    A << 24.
 
     Examples
     --------
@@ -161,6 +185,9 @@ def pack_rgbx(image: np.ndarray) -> np.ndarray:
     >>> p.shape, int(p[0, 0]) == 1 + (2 << 8) + (3 << 16), int(p[1, 1]) == int(p[0, 0])
     ((2, 2), True, True)
     """
+    if image.shape[2] == 4:
+        padded = cv2.copyMakeBorder(premultiply(image, dtype=np.uint8), 0, 1, 0, 1, cv2.BORDER_REPLICATE)
+        return padded.view(np.uint32)[..., 0]
     # two SIMD passes in OpenCV (edge padding, then RGB -> RGBX with X = 0): ~10x faster
     # than numpy's strided channel copies, and this is on a pair's first frame
     padded = cv2.copyMakeBorder(np.ascontiguousarray(image), 0, 1, 0, 1, cv2.BORDER_REPLICATE)
@@ -213,7 +240,7 @@ class _Pair:
 
 
 def _difference_box(a: np.ndarray, b: np.ndarray) -> Crop:
-    """Box of the pixels where ``a`` and ``b`` differ (packed ``(H, W)`` or ``(H, W, 3)`` images)."""
+    """Box of the pixels where ``a`` and ``b`` differ (packed ``(H, W)`` or ``(H, W, C)`` images)."""
     diff = a != b if a.ndim == 2 else np.any(a != b, axis=2)
     rows = np.flatnonzero(diff.any(axis=1))
     if rows.size == 0:
@@ -265,6 +292,8 @@ class Renderer:
     >>> frame = r.render("A", "D", 0.5)
     >>> frame.shape, frame.dtype
     ((512, 512, 3), dtype('uint8'))
+
+    A bank with transparency gives RGBA frames ``(H, W, 4)`` (straight alpha).
     """
 
     def __init__(self, bank, *, method: str = "flow", store: Optional[FlowStore] = None,
@@ -283,25 +312,29 @@ class Renderer:
         self.nb: NormalisedBank = bank if isinstance(bank, NormalisedBank) else normalise(self.bank, cache=self.store)
         h, w = self.nb.shape
         self.shape = (h, w)
-        self._frame = np.empty((h, w, 3), np.uint8)
+        #: 3 (RGB frames) or 4 (RGBA frames, for a bank with transparency).
+        self.channels = self.nb.images[self.bank.names[0]].shape[2]
+        self._frame = np.empty((h, w, self.channels), np.uint8)
         self._frame_pair: Optional[Tuple[str, str]] = None
         self._pairs: "OrderedDict[Tuple[str, str], _Pair]" = OrderedDict()
         self._lock = threading.Lock()
         self._local = threading.local()
         self._packed_images: Dict[str, np.ndarray] = {}
+        self._alpha_planes: Dict[str, np.ndarray] = {}
         self._rgbx_images: Dict[str, np.ndarray] = {}
         #: Threads one flow frame is split across. All cores by default (a single frame,
         #: e.g. live playback, comes back sooner); 1 when frames themselves are rendered in
         #: parallel (lipsync render) or when measuring one core.
         self.frame_threads = max(1, os.cpu_count() or 1)
         self._pool = None
-        self._full_a = np.empty((h, w, 3), np.uint8)
-        self._full_b = np.empty((h, w, 3), np.uint8)
+        self._full_a = np.empty((h, w, self.channels), np.uint8)
+        self._full_b = np.empty((h, w, self.channels), np.uint8)
 
     # ------------------------------------------------------------------ public
     def render(self, from_viseme: str, to_viseme: str, alpha: float, *, out: Optional[np.ndarray] = None
                ) -> np.ndarray:
-        """The frame at ``alpha`` between two visemes, RGB ``uint8`` ``(H, W, 3)``.
+        """The frame at ``alpha`` between two visemes, RGB ``uint8`` ``(H, W, 3)`` (RGBA
+        ``(H, W, 4)`` for a bank with transparency).
 
         Without ``out`` the returned array is the renderer's own buffer, overwritten by the
         next call: copy it to keep it.
@@ -325,13 +358,13 @@ class Renderer:
                 self._frame_pair = None
             return frame
         if self.method == "dissolve":
-            cv2.addWeighted(imgs[from_viseme], 1.0 - alpha, imgs[to_viseme], alpha, 0.0, dst=frame)
+            self._blend(imgs[from_viseme], imgs[to_viseme], alpha, frame)
             if out is None:
                 self._frame_pair = None
             return frame
         if self.method == "beier-neely":
             wa, wb = self._beier_neely_parts(from_viseme, to_viseme, alpha)
-            cv2.addWeighted(wa, 1.0 - alpha, wb, alpha, 0.0, dst=frame)
+            self._blend(wa, wb, alpha, frame)
             if out is None:
                 self._frame_pair = None
             return frame
@@ -348,7 +381,7 @@ class Renderer:
             self._flow_frame(pair, alpha, frame)
         else:
             buf_a, buf_b = self._splat_parts(pair, alpha)
-            cv2.addWeighted(buf_a, 1.0 - alpha, buf_b, alpha, 0.0, dst=frame[r.y0:r.y1, r.x0:r.x1])
+            self._blend(buf_a, buf_b, alpha, frame[r.y0:r.y1, r.x0:r.x1])
         return frame
 
     def parts(self, from_viseme: str, to_viseme: str, alpha: float) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -374,7 +407,7 @@ class Renderer:
                     buf_a, buf_b = self._splat_parts(pair, alpha)
                     wa[r.y0:r.y1, r.x0:r.x1] = buf_a
                     wb[r.y0:r.y1, r.x0:r.x1] = buf_b
-        blend = cv2.addWeighted(wa, 1.0 - alpha, wb, alpha, 0.0)
+        blend = self._blend(wa, wb, alpha, np.empty_like(wa))
         return wa, wb, blend
 
     def inverse_map(self, from_viseme: str, to_viseme: str, t: float, side: str = "a") -> np.ndarray:
@@ -389,6 +422,12 @@ class Renderer:
         out = np.zeros((inv.data.shape[1], inv.coarse_width, 2), np.float32)
         _fill_coarse(inv, t, out)
         return out
+
+    def _blend(self, a: np.ndarray, b: np.ndarray, alpha: float, out: np.ndarray) -> np.ndarray:
+        """``(1 - alpha) a + alpha b`` into ``out``: premultiplied when the frames have alpha."""
+        if self.channels == 4:
+            return blend_rgba(a, b, alpha, out)
+        return cv2.addWeighted(a, 1.0 - alpha, b, alpha, 0.0, dst=out)
 
     # ------------------------------------------------------------------ checks
     def _check(self, a: str, b: str, alpha: float) -> None:
@@ -431,7 +470,9 @@ class Renderer:
             box = fwd.inverse.box
             # the images in the form this renderer's kernel reads (one value per pixel)
             h, w = self.shape
-            pa, pb = (self._packed(a), self._packed(b)) if self.kernel == "numba" else \
+            # (RGBA: compared premultiplied, alpha included: pixels differing only in the
+            # hidden colour of transparency are the same)
+            pa, pb = (self._packed(a), self._packed(b)) if self.kernel == "numba" and self.channels == 3 else \
                 (self._rgbx(a)[:h, :w], self._rgbx(b)[:h, :w])
             roi = union_box([box, _difference_box(pa, pb)], self.shape, 0)
             pair = _Pair(a=a, b=b, roi=roi, box=box, inv_a=fwd.inverse, inv_b=bwd.inverse,
@@ -482,10 +523,12 @@ class Renderer:
         jobs = [(1.0 - alpha, out)] if out_b is None else [(1.0, out), (0.0, out_b)]
         level = KERNELS.get(self.kernel)
 
+        nch = self.channels
+
         def band(y0, y1):
             for wa, dst in jobs:
                 _flowkernel.warp_blend(pa, pb, ia.data, ib.data, dst, dst.strides[0], *geometry,
-                                       y0, y1, r.x0, r.x1, *side_a, *side_b, wa, level)
+                                       y0, y1, r.x0, r.x1, *side_a, *side_b, wa, level, nch)
         return band
 
     def _bands_numba(self, p: _Pair, alpha: float, out: np.ndarray, out_b: Optional[np.ndarray]):
@@ -501,6 +544,16 @@ class Renderer:
         box = (bx.y0, bx.x0, bx.y1 - bx.y0, bx.x1 - bx.x0, ia.step)
         jobs = [(int(round((1.0 - alpha) * _BLEND_ONE)), out)] if out_b is None else \
             [(_BLEND_ONE, out), (0, out_b)]  # the two warped images alone: all weight on one side
+
+        if self.channels == 4:
+            aa, ab = self._alpha_plane(p.a), self._alpha_plane(p.b)
+
+            def band(y0, y1):
+                _, _, rb, rf = self._scratch(hc, ia.coarse_width)
+                for ka, dst in jobs:
+                    _numba_kernels().warp_blend_rgba(pa, pb, aa, ab, da, db, *box, y0, y1, r.x0, r.x1, ka, dst,
+                                                     rb, rf)
+            return band
 
         def band(y0, y1):
             # each thread its own row buffers; the coarse planes are shared, read-only
@@ -529,6 +582,12 @@ class Renderer:
             got = self._packed_images[v] = pack_pixels(self.nb.images[v])
         return got
 
+    def _alpha_plane(self, v: str) -> np.ndarray:
+        got = self._alpha_planes.get(v)
+        if got is None:
+            got = self._alpha_planes[v] = pack_alpha(self.nb.images[v])
+        return got
+
     def _splat_parts(self, p: _Pair, alpha: float) -> Tuple[np.ndarray, np.ndarray]:
         r = p.roi
         if p.splat_state is None:
@@ -538,7 +597,7 @@ class Renderer:
                              identity_grid((r.y1 - r.y0, r.x1 - r.x0)))
         fwd, bwd, grid = p.splat_state
         imgs = self.nb.images
-        buf_a = np.empty(grid.shape[:2] + (3,), np.uint8)
+        buf_a = np.empty(grid.shape[:2] + (self.channels,), np.uint8)
         buf_b = np.empty_like(buf_a)
         _splat(imgs[p.a][r.y0:r.y1, r.x0:r.x1], fwd, alpha, grid, buf_a)
         _splat(imgs[p.b][r.y0:r.y1, r.x0:r.x1], bwd, 1.0 - alpha, grid, buf_b)
@@ -549,7 +608,11 @@ class Renderer:
         lines = (1.0 - alpha) * nb.lines[a] + alpha * nb.lines[b]
         for src, out in ((a, self._full_a), (b, self._full_b)):
             m = beier_neely_map(self.shape, dst_lines=lines, src_lines=nb.lines[src], a=w.a, b=w.b, p=w.p)
-            cv2.remap(nb.images[src], m, None, cv2.INTER_LINEAR, dst=out, borderMode=cv2.BORDER_REPLICATE)
+            if self.channels == 4:  # resampled premultiplied
+                unpremultiply(cv2.remap(premultiply(nb.images[src]), m, None, cv2.INTER_LINEAR,
+                                        borderMode=cv2.BORDER_REPLICATE), out)
+            else:
+                cv2.remap(nb.images[src], m, None, cv2.INTER_LINEAR, dst=out, borderMode=cv2.BORDER_REPLICATE)
         return self._full_a, self._full_b
 
 
@@ -574,12 +637,19 @@ def _canonical(method: str) -> str:
     return method.lower().replace("_", "-")
 
 
-def _splat(image: np.ndarray, flow: np.ndarray, t: float, grid: np.ndarray, out: np.ndarray) -> None:
+def _splat(image: np.ndarray, flow: np.ndarray, t: float, grid: np.ndarray, out: np.ndarray, *,
+           _premultiplied: bool = False) -> None:
     """Paper 3.4 forward mapping: carry each pixel to ``X + t*flow(X)``, then fill holes.
 
     Each source pixel adds its colour, with bilinear weights, to the four output pixels
     around its target; ``np.bincount`` does the scattered sums in one pass per channel.
+    RGBA: the sums and the hole filling are of premultiplied colour; ``out`` gets straight RGBA.
     """
+    if image.shape[2] == 4 and not _premultiplied:
+        p = np.empty(out.shape, np.uint8)
+        _splat(premultiply(image, dtype=np.uint8), flow, t, grid, p, _premultiplied=True)
+        unpremultiply(p, out)
+        return
     h, w = out.shape[:2]
     tx = (grid[..., 0] + t * flow[..., 0]).ravel()
     ty = (grid[..., 1] + t * flow[..., 1]).ravel()
@@ -589,8 +659,9 @@ def _splat(image: np.ndarray, flow: np.ndarray, t: float, grid: np.ndarray, out:
     fy = (ty - y0).astype(np.float32)
     x0 = x0.astype(np.int64)
     y0 = y0.astype(np.int64)
-    colours = image.reshape(-1, 3).astype(np.float32)
-    acc = np.zeros((h * w, 3), np.float64)
+    nch = image.shape[2]
+    colours = image.reshape(-1, nch).astype(np.float32)
+    acc = np.zeros((h * w, nch), np.float64)
     weight = np.zeros(h * w, np.float64)
     for dx, dy, wgt in ((0, 0, (1 - fx) * (1 - fy)), (1, 0, fx * (1 - fy)),
                         (0, 1, (1 - fx) * fy), (1, 1, fx * fy)):
@@ -599,20 +670,26 @@ def _splat(image: np.ndarray, flow: np.ndarray, t: float, grid: np.ndarray, out:
         idx = (ys * w + xs)[ok]
         wk = wgt[ok]
         weight += np.bincount(idx, weights=wk, minlength=h * w)
-        for c in range(3):
+        for c in range(nch):
             acc[:, c] += np.bincount(idx, weights=wk * colours[ok, c], minlength=h * w)
     holes = weight < MIN_SPLAT_WEIGHT
     np.divide(acc, np.maximum(weight, MIN_SPLAT_WEIGHT)[:, None], out=acc)
-    np.copyto(out, np.clip(np.rint(acc), 0, 255).astype(np.uint8).reshape(h, w, 3))
+    np.copyto(out, np.clip(np.rint(acc), 0, 255).astype(np.uint8).reshape(h, w, nch))
     if holes.any():
-        cv2.inpaint(out, holes.reshape(h, w).view(np.uint8), INPAINT_RADIUS, cv2.INPAINT_TELEA, dst=out)
+        mask = holes.reshape(h, w).view(np.uint8)
+        if nch == 3:
+            cv2.inpaint(out, mask, INPAINT_RADIUS, cv2.INPAINT_TELEA, dst=out)
+        else:  # cv2.inpaint takes 1 or 3 channels: colour and alpha apart
+            out[..., :3] = cv2.inpaint(np.ascontiguousarray(out[..., :3]), mask, INPAINT_RADIUS, cv2.INPAINT_TELEA)
+            out[..., 3] = cv2.inpaint(np.ascontiguousarray(out[..., 3]), mask, INPAINT_RADIUS, cv2.INPAINT_TELEA)
 
 
 _RENDERERS: Dict[Tuple[int, str], Renderer] = {}
 
 
 def morph(bank, from_name: str, to_name: str, alpha: float, method: str = "flow") -> np.ndarray:
-    """One in-between frame: RGB ``uint8`` ``(H, W, 3)``, a new array.
+    """One in-between frame: RGB ``uint8`` ``(H, W, 3)``, a new array (RGBA ``(H, W, 4)``,
+    straight alpha, for a bank with transparency).
 
     Parameters
     ----------

@@ -39,14 +39,16 @@ Examples
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from typing import Iterable, List, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
-from .errors import InputError
-from .timeline import VISEME, Segment, Timeline
-from .timing import DEFAULT_CURVE, Curve, get_curve
+from .coarticulation import as_params, dominance_sequence
+# FrameSpec and the frame arithmetic live below both timing models; imported here as they
+# always were (lipsync.sequencer.FrameSpec etc.).
+from .frames import FPS_RANGE, MAX_FRAMES, FrameSpec, base_track, check_fps, checked_frames, frame_count, merge  # noqa: F401
+from .timeline import Segment, Timeline
+from .timing import DEFAULT_CURVE, Curve, get_curve, is_model
 
 # --- tuning constants (seconds) -------------------------------------------------------------
 
@@ -68,18 +70,6 @@ MAX_HELD_PAUSE_S = 0.2
 # Non-closure segments shorter than this are dropped: lips cannot visibly reach a shape in
 # under 50 ms (about one frame at 24 fps), so showing it only adds a one-frame flicker.
 MIN_SEGMENT_S = 0.05
-#: Most frames one timeline may make: 11 hours at 25 fps, longer than any speech track, and
-#: bounded so that a wrong number in a file (frame 10^9) is an error, not gigabytes of frames.
-MAX_FRAMES = 1_000_000
-
-FPS_RANGE = (1.0, 120.0)
-#: The output frame rate when none is given, one value for every command and API that makes
-#: frames (``lipsync render``, ``timeline --frames``, ``serve``, ``batch``, the animators), so
-#: the schedule ``timeline --frames`` prints is the one ``render`` renders. 25 fps is PAL
-#: video's rate and enough for lips (Rhubarb needs >= 24 for hard cuts; morphs look smooth
-#: well below that, so lower rates are allowed).
-DEFAULT_FPS = 25.0
-
 # Numerical slack when comparing alphas and times (float noise, not a tuning value).
 _EPS = 1e-9
 
@@ -110,59 +100,6 @@ RULES: Tuple[Tuple[str, str, str], ...] = (
 )
 
 
-@dataclass(frozen=True)
-class FrameSpec:
-    """What one output frame shows: ``from_viseme`` morphed toward ``to_viseme`` by ``alpha``.
-
-    Examples
-    --------
-    >>> FrameSpec("A", "D", 0.25).alpha
-    0.25
-    """
-
-    from_viseme: str
-    to_viseme: str
-    alpha: float
-
-    @property
-    def is_still(self) -> bool:
-        """True when the frame is exactly one viseme (no morph needed)."""
-        return self.from_viseme == self.to_viseme or self.alpha <= 0.0 or self.alpha >= 1.0
-
-    @property
-    def shown(self) -> Optional[str]:
-        """The viseme shown exactly, or None for an in-between frame."""
-        if self.from_viseme == self.to_viseme or self.alpha <= 0.0:
-            return self.from_viseme
-        if self.alpha >= 1.0:
-            return self.to_viseme
-        return None
-
-
-def frame_count(duration: float, fps: float) -> int:
-    """Number of frames for ``duration`` seconds: ``ceil(duration * fps)``.
-
-    Examples
-    --------
-    >>> frame_count(1.0, 24), frame_count(1.01, 24), frame_count(0.0, 24)
-    (24, 25, 0)
-    """
-    # Times like 1.358685 s * 25 fps carry float noise; a product within 1e-9 of an integer
-    # is that integer, so a 2.0 s timeline never gets a 49th frame at 24 fps.
-    return max(0, int(math.ceil(duration * fps - 1e-9)))
-
-
-def check_fps(fps: float) -> float:
-    """``fps`` as a float if within FPS_RANGE, else InputError."""
-    try:
-        value = float(fps)
-    except (TypeError, ValueError):
-        raise InputError(f"frame rate must be a number, not {fps!r}") from None
-    if not (FPS_RANGE[0] <= value <= FPS_RANGE[1]):
-        raise InputError(f"frame rate {fps!r} is outside {FPS_RANGE[0]:g}..{FPS_RANGE[1]:g}")
-    return value
-
-
 def plan_segments(visemes: Timeline, *, rest: str, closures: Iterable[str] = (),
                   max_held_pause: float = MAX_HELD_PAUSE_S, min_segment: float = MIN_SEGMENT_S,
                   duration: Optional[float] = None, start: float = 0.0) -> List[Tuple[float, float, str]]:
@@ -179,21 +116,7 @@ def plan_segments(visemes: Timeline, *, rest: str, closures: Iterable[str] = (),
     [(0.0, 0.2, 'X'), (0.2, 0.6, 'A'), (0.6, 0.9, 'D'), (0.9, 1.0, 'X')]
     """
     closure_set = set(closures)
-    total = visemes.duration if duration is None else float(duration)
-    # Rule 1: gaps are rest.
-    segs: List[Segment] = []
-    t = float(start)
-    for s in visemes:
-        if s.start > total:
-            break
-        if s.start > t:
-            segs.append(Segment(t, s.start, rest))
-        segs.append(Segment(max(s.start, t), min(s.end, total), s.label))
-        t = min(s.end, total)
-    if t < total:
-        segs.append(Segment(t, total, rest))
-    segs = [s for s in segs if s.duration > 0]
-    segs = _merge(segs)
+    segs = base_track(visemes, rest=rest, duration=duration, start=start)   # rules 1-2
     # Rule 3: short pauses between sounds hold the previous viseme.
     held: List[Segment] = []
     for i, s in enumerate(segs):
@@ -202,7 +125,7 @@ def plan_segments(visemes: Timeline, *, rest: str, closures: Iterable[str] = (),
             held.append(Segment(s.start, s.end, held[-1].label))
         else:
             held.append(s)
-    segs = _merge(held)
+    segs = merge(held)
     # Rule 4: drop short non-closure segments, shortest first, so that a run of short ones
     # keeps the longest of them; the freed time goes half to each neighbour.
     while len(segs) > 1:
@@ -222,19 +145,8 @@ def plan_segments(visemes: Timeline, *, rest: str, closures: Iterable[str] = (),
             segs[i - 1] = Segment(segs[i - 1].start, s.mid, segs[i - 1].label)
             segs[i + 1] = Segment(s.mid, segs[i + 1].end, segs[i + 1].label)
         del segs[i]
-        segs = _merge(segs)
+        segs = merge(segs)
     return [(s.start, s.end, s.label) for s in segs]
-
-
-def _merge(segs: List[Segment]) -> List[Segment]:
-    # Rule 2: adjacent equal visemes merge.
-    out: List[Segment] = []
-    for s in segs:
-        if out and out[-1].label == s.label:
-            out[-1] = Segment(out[-1].start, s.end, s.label)
-        else:
-            out.append(s)
-    return out
 
 
 def plan_transitions(segments: Sequence[Tuple[float, float, str]], *,
@@ -265,10 +177,11 @@ def plan_transitions(segments: Sequence[Tuple[float, float, str]], *,
     return np.stack([t0, t1], axis=1)
 
 
-def sequence(visemes: Timeline, *, fps: float, rest: str, timing: Union[str, Curve] = DEFAULT_CURVE,
+def sequence(visemes: Timeline, *, fps: float, rest: str, timing: Union[str, Curve, object] = DEFAULT_CURVE,
              closures: Iterable[str] = (), duration: Optional[float] = None,
              max_transition: float = MAX_TRANSITION_S, hold_half_width: float = HOLD_HALF_WIDTH_S,
-             max_held_pause: float = MAX_HELD_PAUSE_S, min_segment: float = MIN_SEGMENT_S) -> List[FrameSpec]:
+             max_held_pause: float = MAX_HELD_PAUSE_S, min_segment: float = MIN_SEGMENT_S,
+             classes=None) -> List[FrameSpec]:
     """Turn a viseme timeline into one FrameSpec per output frame.
 
     Parameters
@@ -280,14 +193,20 @@ def sequence(visemes: Timeline, *, fps: float, rest: str, timing: Union[str, Cur
         Output frame rate, 1 to 120. Frame n shows time n / fps.
     rest : str
         The viseme for silence (the bank's rest viseme).
-    timing : str or callable
-        Timing curve name from ``lipsync.timing.CURVES`` or a callable on [0, 1].
+    timing : str, callable or DominanceParams
+        Timing curve name from ``lipsync.timing.CURVES`` or a callable on [0, 1] (rules 5-7
+        with that curve); or ``"dominance"`` (or fitted
+        :class:`~lipsync.coarticulation.DominanceParams`): the coarticulation model of
+        :mod:`lipsync.coarticulation` instead of rules 3-7.
     closures : iterable of str
         Visemes that must be shown fully even when short (the closed-lips viseme).
     duration : float, optional
         Length of the output; default ``visemes.duration``.
     max_transition, hold_half_width, max_held_pause, min_segment : float
         The rule constants (seconds), overridable for experiments.
+    classes : mapping, optional
+        For the dominance model: viseme -> class
+        (:func:`lipsync.coarticulation.viseme_classes` of the map).
 
     Returns
     -------
@@ -301,20 +220,12 @@ def sequence(visemes: Timeline, *, fps: float, rest: str, timing: Union[str, Cur
     >>> [f.shown or "~" for f in sequence(tl, fps=10, rest="X")]
     ['X', 'X', 'X', '~', 'D', 'D']
     """
-    fps = check_fps(fps)
-    if not isinstance(visemes, Timeline):
-        raise InputError("sequence() needs a Timeline")
-    if visemes.kind != VISEME:
-        raise InputError("sequence() needs a viseme timeline; map the phonemes first (map_timeline)",
-                         path=visemes.path)
+    if is_model(timing) or not (isinstance(timing, str) or callable(timing)):
+        return dominance_sequence(visemes, fps=fps, rest=rest, closures=closures, classes=classes,
+                                  params=as_params(timing), duration=duration)
+    fps, total, n_frames = checked_frames(visemes, fps, duration)
     curve = get_curve(timing)
     closure_set = set(closures)
-    total = visemes.duration if duration is None else float(duration)
-    n_frames = frame_count(total, fps)
-    if n_frames > MAX_FRAMES:  # found with the fuzz tests' huge numbers: Moho frame 10**9 asked for 7.8 GB here
-        raise InputError(f"the timeline lasts {total:g} s: {n_frames} frames at {fps:g} fps, above the "
-                         f"limit of {MAX_FRAMES} (a time or frame number in the file is likely wrong)",
-                         path=visemes.path)
     if n_frames == 0:
         return []
     segs = plan_segments(visemes, rest=rest, closures=closure_set, max_held_pause=max_held_pause,

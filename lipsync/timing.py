@@ -31,11 +31,11 @@ Examples
 
 from __future__ import annotations
 
-from typing import Callable, Union
+from typing import Callable, List, Union
 
 import numpy as np
 
-from .errors import InputError
+from .errors import InputError, UnknownNameError
 from .registry import Registry
 
 ArrayLike = Union[float, np.ndarray]
@@ -87,6 +87,52 @@ CURVES.register("smoothstep", smoothstep)
 
 DEFAULT_CURVE = "sqrt-fast-middle"
 
+#: Timing models that are not a transition curve of the rule-based sequencer: each replaces
+#: the sequencer's transitions altogether (name -> what it is). ``dominance`` is the
+#: coarticulation model of :mod:`lipsync.coarticulation`: every sound pulls the mouth toward
+#: its shape with a dominance that rises before it and decays after it (Cohen & Massaro).
+#: Wherever a timing is chosen (``--timing``, ``timing=``, bank.yaml's ``timing:``, a batch
+#: manifest) a curve name and a model name are equally valid: see :func:`timing_names`.
+MODELS: Registry[str] = Registry("timing model")
+MODELS.register("dominance", "coarticulation: dominance functions fitted to real speech",
+                aliases=("coarticulation",))
+
+
+def timing_names() -> List[str]:
+    """Every valid timing name: the curves, then the models (the CLI's ``--timing`` choices).
+
+    Examples
+    --------
+    >>> timing_names()
+    ['linear', 'sqrt-fast-middle', 'sqrt-fast-ends', 'smoothstep', 'dominance']
+    """
+    return CURVES.names() + MODELS.names()
+
+
+def is_model(timing) -> bool:
+    """True when ``timing`` names a timing model (not a curve).
+
+    Examples
+    --------
+    >>> is_model("dominance"), is_model("Coarticulation"), is_model("linear"), is_model(lambda t: t)
+    (True, True, False, False)
+    """
+    return isinstance(timing, str) and timing in MODELS
+
+
+def check_timing(name: str) -> str:
+    """A timing name as registered (curve or model); unknown names list every valid one.
+
+    Examples
+    --------
+    >>> check_timing("paper-text"), check_timing("DOMINANCE")
+    ('sqrt-fast-middle', 'dominance')
+    """
+    for registry in (CURVES, MODELS):
+        if isinstance(name, str) and name in registry:
+            return registry.canonical(name)
+    raise UnknownNameError(f"unknown timing {name!r}; valid: {', '.join(timing_names())}")
+
 
 def get_curve(name_or_callable: Union[str, Curve]) -> Curve:
     """A timing curve by registered name, or a callable passed through (vectorised).
@@ -103,6 +149,9 @@ def get_curve(name_or_callable: Union[str, Curve]) -> Curve:
     [0.25]
     """
     if isinstance(name_or_callable, str):
+        if name_or_callable not in CURVES and name_or_callable in MODELS:
+            raise InputError(f"{name_or_callable!r} is a timing model, not a transition curve "
+                             f"(lipsync.sequencer.sequence takes either)")
         return CURVES.get(name_or_callable)
     if not callable(name_or_callable):
         raise InputError(f"a timing curve must be a name or a callable, not {name_or_callable!r}")

@@ -57,6 +57,8 @@ _VG = -_VR - _VB
 _COEFFICIENTS = (_YR, _YG, _YB, _UR, _UG, _UB, _VR, _VG, _VB)
 _YHALF = (16 << _SHIFT) + (1 << (_SHIFT - 1))
 _CHALF = (128 << (_SHIFT + 2)) + (1 << (_SHIFT + 1))
+# The same, as the int32 values numba's copy of the kernel takes.
+_NUMBA_CONSTANTS = (tuple(np.int32(c) for c in _COEFFICIENTS), np.int32(_YHALF), np.int32(_CHALF), np.int32(_SHIFT))
 
 
 def yuv420p_size(width: int, height: int) -> int:
@@ -108,5 +110,5 @@ def rgb_to_yuv420p(rgb: np.ndarray, out: Optional[np.ndarray] = None) -> np.ndar
     else:  # pragma: no cover - depends on the install
         from ._numba_kernels import rgb_to_yuv420p as convert
 
-        convert(rgb, out)
+        convert(rgb, out, *_NUMBA_CONSTANTS)
     return out

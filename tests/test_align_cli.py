@@ -17,7 +17,7 @@ import synthetic
 from lipsync import Animator, Bank, read_timeline
 from lipsync.encode import probe
 from lipsync.speech.align import AlignmentWarning, MissingWordsWarning, align
-from lipsync.timeline import READERS
+from lipsync.readers import READERS
 
 ROOT = Path(__file__).resolve().parents[1]
 SAMPLES = ROOT / "samples"

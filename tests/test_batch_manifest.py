@@ -48,7 +48,8 @@ def test_csv_and_json_lines_give_the_same_jobs_with_paths_relative_to_the_manife
     strip = [(j.input, j.output, j.bank, j.fps, j.timing, j.method, j.map) for j in a]
     assert strip == [(j.input, j.output, j.bank, j.fps, j.timing, j.method, j.map) for j in b]
     assert a[0].input == folder / "in" / "a.tsv" and a[0].bank == Path(synthetic_bank_dir).resolve()
-    assert (a[0].fps, a[1].fps, a[1].method, a[1].timing) == (30.0, 25.0, "flow", "sqrt-fast-middle")
+    # no timing given: "" is the bank's own (bank.yaml's timing, else the default curve)
+    assert (a[0].fps, a[1].fps, a[1].method, a[1].timing) == (30.0, 25.0, "flow", "")
 
 
 def test_every_bad_row_is_reported_with_its_line_before_anything_runs(folder, synthetic_bank_dir, capsys):

@@ -359,7 +359,7 @@ def test_timeline_naming_a_viseme_the_bank_lacks(bank, tmp_path, capsys):
     refused(render_args(bank, out, cues), capsys, str(cues), "Z", out=out)
 
 
-@pytest.mark.parametrize("option, value", [("--method", "morph-o-matic"), ("--format", "gif")])
+@pytest.mark.parametrize("option, value", [("--method", "morph-o-matic"), ("--format", "tiff")])
 def test_unknown_method_or_format(bank, tmp_path, capsys, option, value):
     out = tmp_path / "talk.mp4"
     with pytest.raises(SystemExit) as exc:

@@ -9,7 +9,7 @@ import pytest
 
 from lipsync.cli import main
 from lipsync.phonemes import canonical_viseme_timeline, load_map
-from lipsync.timeline import read_timeline
+from lipsync.readers import read_timeline
 
 ROOT = Path(__file__).resolve().parent.parent
 SAMPLES = ROOT / "samples"

@@ -76,10 +76,10 @@ def leftovers(folder, *expected):
 # -- format choice ---------------------------------------------------------------------------
 
 def test_registry_names_and_format_choice(tmp_path):
-    assert ENCODERS.names() == ["mp4", "png"]
+    assert ENCODERS.names() == ["mp4", "png", "webm", "mov", "qtrle", "webp", "gif"]
     assert format_for(tmp_path / "a.mp4") == "mp4"
     assert format_for(tmp_path / "a.MKV") == "mp4"
-    assert format_for(tmp_path / "a.mov") == "mp4"
+    assert format_for(tmp_path / "a.mov") == "mov"  # ProRes 4444 since issue 18 (H.264: format="mp4")
     assert format_for(str(tmp_path / "seq") + os.sep) == "png"
     (tmp_path / "existing").mkdir()
     assert format_for(tmp_path / "existing") == "png"
@@ -87,8 +87,8 @@ def test_registry_names_and_format_choice(tmp_path):
         format_for(tmp_path / "a.avi")
     assert "mp4" in str(err.value) and "png" in str(err.value) and "a.avi" in str(err.value)
     with pytest.raises(UnknownNameError) as err:
-        open_writer(tmp_path / "a.mp4", fps=FPS, size=(W, H), format="gif")
-    assert "'gif'" in str(err.value) and "mp4, png" in str(err.value)
+        open_writer(tmp_path / "a.mp4", fps=FPS, size=(W, H), format="tiff")
+    assert "'tiff'" in str(err.value) and "mp4, png" in str(err.value)
     assert leftovers(tmp_path, "existing") == []
 
 
@@ -155,10 +155,11 @@ def test_mp4_odd_size_is_padded_by_repeating_the_edge(tmp_path):
 def test_other_containers(tmp_path):
     for name in ("clip.mkv", "clip.mov"):
         _, frames = colour_frames(5)
-        with open_writer(tmp_path / name, fps=FPS, size=(W, H), quiet=True) as w:
+        with open_writer(tmp_path / name, fps=FPS, size=(W, H), quiet=True, format="mp4") as w:
             for f in frames:
                 w.write(f)
         assert probe(tmp_path / name)["n_frames"] == 5
+        assert probe(tmp_path / name)["video_codec"] == "h264"
         assert len(decode(tmp_path / name)) == 5
     assert leftovers(tmp_path, "clip.mkv", "clip.mov") == []
 

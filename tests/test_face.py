@@ -335,7 +335,7 @@ def test_anchors_cut_at_the_border_or_left_out(mesh, frames):
 
 
 def test_grid_alignment_reader():
-    from lipsync.timeline import read_timeline
+    from lipsync.readers import read_timeline
 
     tl = read_timeline(GRID / "prap6p.align")
     words = [ln.split() for ln in (GRID / "prap6p.align").read_text().splitlines()]

@@ -79,7 +79,7 @@ def test_bad_lines_are_refused(bad):
 
 def test_bad_images_are_refused():
     with pytest.raises(ValueError, match="RGB"):
-        draw_lines(np.zeros((8, 8, 4), np.uint8), {})
+        draw_lines(np.zeros((8, 8, 5), np.uint8), {})
     with pytest.raises(ValueError):
         strip([[np.zeros((8, 8, 2), np.uint8)]])
 

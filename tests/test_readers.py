@@ -18,7 +18,8 @@ from hypothesis import given, settings, strategies as st
 
 from lipsync.errors import InputError, TimelineError, UnknownNameError
 from lipsync.phonemes import load_map, map_timeline, unknown_labels
-from lipsync.timeline import READERS, Segment, Timeline, read_timeline
+from lipsync.timeline import Segment, Timeline
+from lipsync.readers import READERS, read_timeline
 
 DATA = Path(__file__).parent / "data"
 TIMELINES = DATA / "timelines"
@@ -55,7 +56,7 @@ def test_golden_cases_exist_for_every_format():
 
 
 def _reader_for(path: Path) -> str:
-    from lipsync.timeline import _choose_reader
+    from lipsync.readers import _choose_reader
 
     return _choose_reader(str(path), path.read_bytes()).name
 

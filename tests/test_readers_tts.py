@@ -18,7 +18,8 @@ from lipsync.errors import TimelineError
 from lipsync.phonemes import load_map
 from lipsync.speech.lexicon import normalise_transcript, pronounce
 from lipsync.speech.phonetise import phones_of, split_word, words_to_phones
-from lipsync.timeline import Segment, Timeline, read_timeline
+from lipsync.timeline import Segment, Timeline
+from lipsync.readers import read_timeline
 
 TIMELINES = Path(__file__).parent / "data" / "timelines"
 
@@ -259,7 +260,7 @@ def test_elevenlabs_wrappers_and_spellings(tmp_path):
                                       ("whisper_timestamped_apollo11.json", "whisper"),
                                       ("elevenlabs_v3_tags.json", "elevenlabs")])
 def test_detected_under_any_extension(tmp_path, name, fmt):
-    from lipsync.timeline import _choose_reader
+    from lipsync.readers import _choose_reader
 
     data = (TIMELINES / name).read_bytes()
     for ext in (".json", ".txt", ".dat", ""):

@@ -10,7 +10,7 @@ import pytest
 
 from lipsync.cli import main
 from lipsync.errors import MapError
-from lipsync.timeline import read_timeline
+from lipsync.readers import read_timeline
 from lipsync.cli._common import add_timeline_options, load_viseme_timeline
 
 DATA = Path(__file__).parent / "data"

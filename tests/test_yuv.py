@@ -130,10 +130,11 @@ def test_docstring_examples_run():
 def test_compiled_and_numba_conversions_give_the_same_bytes():
     pytest.importorskip("lipsync._flowkernel")
     from lipsync._numba_kernels import rgb_to_yuv420p as numba_convert
+    from lipsync.yuv import _NUMBA_CONSTANTS
 
     rng = np.random.default_rng(7)
     for h, w in ((2, 2), (38, 62), (144, 256)):
         rgb = rng.integers(0, 256, (h, w, 3), np.uint8)
         want = np.empty(yuv420p_size(w, h), np.uint8)
-        numba_convert(rgb, want)
+        numba_convert(rgb, want, *_NUMBA_CONSTANTS)
         np.testing.assert_array_equal(rgb_to_yuv420p(rgb), want)

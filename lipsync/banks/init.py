@@ -21,6 +21,11 @@ Two layouts:
 ``auto`` (the default) picks ``mouth`` for images of at most :data:`SPRITE_MAX_SIDE`
 pixels a side without a face box, ``face`` otherwise.
 
+Mouth sprites are drawn to sit on a character: ``composite`` (``lipsync init DIR --over
+BODY --at X,Y [--scale S]``) writes the bank's ``composite:`` block, so that ``lipsync
+render`` shows the whole character talking (:mod:`lipsync.composite`); the body image is
+not a viseme.
+
 Where the lines come from (``lines``):
 
 * ``face`` — each image's own face: the face mesh (:mod:`lipsync.face`) is placed on every
@@ -97,9 +102,10 @@ class InitResult:
     lines: Dict[str, str] = field(default_factory=dict)
 
 
-def _images(folder: Path) -> List[Path]:
+def _images(folder: Path, exclude: Sequence[str] = ()) -> List[Path]:
     files = sorted(p for p in folder.iterdir()
-                   if p.is_file() and p.suffix.lower() in IMAGE_SUFFIXES and not p.name.startswith("."))
+                   if p.is_file() and p.suffix.lower() in IMAGE_SUFFIXES and not p.name.startswith(".")
+                   and p.name not in exclude)
     if not files:
         raise InputError("no PNG or JPEG images here (one image per viseme)", path=folder)
     return files
@@ -117,6 +123,8 @@ def _bbox(features: Sequence[Dict[str, Feature]], keep) -> np.ndarray:
 def _moving_box(images) -> Optional[np.ndarray]:
     """``[[x0, y0], [x1, y1]]`` (pixel centres) of the pixels that change between images."""
     stack = np.stack(list(images))
+    if stack.shape[-1] == 4:  # sprites: compare what shows (premultiplied), not hidden colours
+        stack = (stack[..., :3].astype(np.uint16) * stack[..., 3:] // 255).astype(np.uint8)
     span = (stack.max(axis=0).astype(np.int16) - stack.min(axis=0)).max(axis=2)
     ys, xs = np.nonzero(span > MOVING_LEVEL)
     if xs.size < MOVING_MIN_SHARE * span.size:
@@ -126,6 +134,16 @@ def _moving_box(images) -> Optional[np.ndarray]:
 
 def _is_mouth(name: str) -> bool:
     return name.startswith(MOUTH_PREFIXES)
+
+
+def _with_composite(doc: dict, composite: dict) -> dict:
+    """``doc`` with a ``composite:`` block just before ``visemes:``."""
+    block = {"image": composite["image"], "at": [float(v) for v in composite["at"]],
+             "scale": float(composite.get("scale", 1.0))}
+    out = {k: v for k, v in doc.items() if k != "visemes"}
+    out["composite"] = block
+    out["visemes"] = doc["visemes"]
+    return out
 
 
 def parse_face_box(text: str) -> Tuple[float, float, float, float]:
@@ -147,7 +165,8 @@ def parse_face_box(text: str) -> Tuple[float, float, float, float]:
 
 def init_bank(folder, *, template: str = "toon", names: Optional[Dict[str, str]] = None,
               face_box: Optional[Tuple[float, float, float, float]] = None, layout: str = "auto",
-              rest: Optional[str] = None, force: bool = False, lines: str = "auto") -> InitResult:
+              rest: Optional[str] = None, force: bool = False, lines: str = "auto",
+              composite: Optional[dict] = None) -> InitResult:
     """Write ``folder/bank.yaml`` for the images in ``folder``; it passes ``lipsync check``.
 
     Parameters
@@ -168,6 +187,9 @@ def init_bank(folder, *, template: str = "toon", names: Optional[Dict[str, str]]
         Overwrite an existing bank.yaml.
     lines : {"auto", "face", "template"}
         Where the control lines come from (see the module docstring).
+    composite : dict, optional
+        ``{"image": NAME, "at": [x, y], "scale": s}``: the body image (a file in ``folder``,
+        not a viseme) the mouth is drawn on and where, written as the bank's ``composite:``.
 
     Returns
     -------
@@ -202,7 +224,8 @@ def init_bank(folder, *, template: str = "toon", names: Optional[Dict[str, str]]
     if yaml_path.exists() and not force:
         raise InputError("bank.yaml exists already; use --force to replace it", path=yaml_path)
 
-    named, system = name_images(_images(folder), names)
+    body_name = composite["image"] if composite else None
+    named, system = name_images(_images(folder, exclude=[body_name] if body_name else []), names)
     images = {}
     size = None
     first = None
@@ -215,6 +238,14 @@ def init_bank(folder, *, template: str = "toon", names: Optional[Dict[str, str]]
                              f"all visemes need one size", path=path)
         images[path.name] = img
     h, w = size
+    if any(img.shape[2] == 4 for img in images.values()):  # one layout, as the bank loader makes it
+        import cv2
+
+        images = {n: img if img.shape[2] == 4 else cv2.cvtColor(img, cv2.COLOR_RGB2RGBA) for n, img in images.items()}
+    cache = dict(images)  # what Bank.from_text may take as decoded (the viseme images, the body)
+    if composite:
+        # the body is validated with the bank (Bank.from_text): inside the folder, placement in range
+        cache[body_name] = _read_image(folder / body_name, "composite", folder / body_name, None)
 
     # Viseme order: the naming system's, then others by name.
     order = list(SYSTEMS[system]) if system else []
@@ -234,11 +265,13 @@ def init_bank(folder, *, template: str = "toon", names: Optional[Dict[str, str]]
         faced = _face_lines(folder, named, visemes, rest, images, forced=lines == "face")
         if faced is not None:
             doc, sources, symmetric = faced
+            if composite:
+                doc = _with_composite(doc, composite)
             header = [f"# Written by lipsync init: lines placed from each image's face "
                       f"({'symmetric' if symmetric else 'not symmetric enough for symmetry: true'}); "
                       f"adjust them with: lipsync edit {folder}"]
             text = dump_bank(doc, header=header)
-            Bank.from_text(text, folder, images=images)
+            Bank.from_text(text, folder, images=cache)
             write_bank_text(yaml_path, text)
             return InitResult(yaml_path=yaml_path, visemes={v: named[v].name for v in visemes}, system=system,
                               rest=rest, layout="face", size=(w, h), lines=sources)
@@ -302,10 +335,12 @@ def init_bank(folder, *, template: str = "toon", names: Optional[Dict[str, str]]
     doc = {"name": folder.resolve().name, "rest": rest,
            "warp": {"a": tbank.warp.a, "b": tbank.warp.b, "p": tbank.warp.p},
            "symmetry": tbank.symmetry, "visemes": doc_visemes}
+    if composite:
+        doc = _with_composite(doc, composite)
     header = [f"# Written by lipsync init from template {template!r} ({layout} layout); "
               f"adjust the lines with: lipsync edit {folder}"]
     text = dump_bank(doc, header=header)
-    Bank.from_text(text, folder, images=images)  # refuse to write a bank that would not load
+    Bank.from_text(text, folder, images=cache)  # refuse to write a bank that would not load
     write_bank_text(yaml_path, text)
     return InitResult(yaml_path=yaml_path, visemes={v: named[v].name for v in visemes}, system=system,
                       rest=rest, layout=layout, size=(w, h),

@@ -23,20 +23,20 @@ from pathlib import Path, PurePosixPath
 from typing import Dict, List, Optional, Tuple, Union
 
 from ..errors import InputError
-from ..sequencer import DEFAULT_FPS
+from ..frames import DEFAULT_FPS
 
 PathLike = Union[str, "os.PathLike[str]"]
 
 #: The fields a row may have, and why each is there.
 FIELDS = {
     "input": "timeline file in any format a reader takes (audio too, where a reader takes it, with text)",
-    "output": "file name under OUTDIR (.mp4, .mov, .mkv); subfolders allowed",
+    "output": "file name under OUTDIR (.mp4, .mkv, .webm, .mov, .webp, .gif); subfolders allowed",
     "bank": "viseme bank folder (default: the shipped toon)",
     "text": "transcript for audio input: the text itself, or a file holding it",
     "audio": "speech to mux into the video",
     "fps": f"frames per second (default: {DEFAULT_FPS:g})",
     "map": "phoneme map: a shipped name or a YAML file",
-    "timing": "transition timing curve name",
+    "timing": "timing name: a transition curve or dominance (default: the bank's, else sqrt-fast-middle)",
     "method": "in-between method name",
 }
 REQUIRED = ("input", "output")
@@ -220,7 +220,7 @@ def read_manifest(path: PathLike, outdir: Optional[PathLike] = None) -> List[Cli
     from ..phonemes import DEFAULT_MAP, MAPS, load_map
     from ..render import METHODS
     from ..sequencer import check_fps
-    from ..timing import CURVES, DEFAULT_CURVE
+    from ..timing import CURVES, MODELS, timing_names
 
     path = Path(path)
     try:
@@ -285,8 +285,9 @@ def read_manifest(path: PathLike, outdir: Optional[PathLike] = None) -> List[Cli
                 out_name = output_name(out)
                 if out_name.endswith(SIDECAR_SUFFIX):
                     raise ValueError(f"output {out!r} ends with {SIDECAR_SUFFIX}, the sidecar suffix")
-                if format_for(out_name) != "mp4":
-                    raise ValueError(f"output {out!r}: batch writes video files (.mp4, .mov, .mkv)")
+                if format_for(out_name) == "png":  # one file per clip: every format but a PNG folder
+                    raise ValueError(f"output {out!r}: batch writes video files (.mp4, .mkv, .webm, .mov, "
+                                     f".webp, .gif)")
                 if out_real is not None:
                     real = (out_real / out_name).resolve()
                     if out_real not in real.parents:
@@ -340,9 +341,9 @@ def read_manifest(path: PathLike, outdir: Optional[PathLike] = None) -> List[Cli
                 if map_ok[candidate] is not None:
                     errs.append(f"map {map_value!r}: {map_ok[candidate]}")
                 map_file = candidate
-        timing = field("timing") or DEFAULT_CURVE
-        if timing not in CURVES:
-            errs.append(f"timing {timing!r}: unknown; valid: {', '.join(CURVES.names())}")
+        timing = field("timing") or ""   # empty: the bank's timing (bank.yaml), else the default curve
+        if timing and not (timing in CURVES or timing in MODELS):
+            errs.append(f"timing {timing!r}: unknown; valid: {', '.join(timing_names())}")
         method = field("method") or "flow"
         if method not in METHODS:
             errs.append(f"method {method!r}: unknown; valid: {', '.join(METHODS.names())}")

@@ -169,7 +169,7 @@ def clip_task(task: ClipTask, pack: BankPack, entries: List[Tuple[str, bytes]],
         out.parent.mkdir()
         report = render_clip(paths["input"], out, bank=local.bank, store=local.store, audio=paths.get("audio"),
                              fps=task.fps, map=paths.get("map", task.map), method=task.method,
-                             timing=task.timing, quiet=True, jobs=1,
+                             timing=task.timing or None, quiet=True, jobs=1,
                              timeline_options=TimelineOptions(text=paths.get("text", task.text)))
         result.update(ok=True, data=out.read_bytes(), frames=report.frames, fps=report.fps,
                       seconds=report.duration, render_seconds=time.perf_counter() - t0)

@@ -111,7 +111,8 @@ def _timed(fn, repeat: int):
 def _align(ctx: Context, rows: List[dict]) -> None:
     from ..speech.align import align_samples
     from ..speech.audio import load_audio
-    from ..timeline import Segment, Timeline, read_timeline
+    from ..timeline import Segment, Timeline
+    from ..readers import read_timeline
 
     wav, lab, grid = (ctx.mfa / f"acoustic_corpus.{ext}" for ext in ("wav", "lab", "TextGrid"))
     pcm = load_audio(wav)

@@ -73,3 +73,70 @@ def track(name: str):
     from ..face.track import track_video
 
     return track_video(video(name))
+
+
+# --- what the real-footage figures measure (shared: coarticulation, real-face renders) -----
+
+#: The lip measures a figure compares, by name (functions of a face track's points).
+MEASURES = ("opening", "width", "protrusion")
+
+
+def lip_measures(points) -> dict:
+    """Lip opening, mouth width and the protrusion proxy of every frame of a track's points.
+
+    ``{"opening": (N,), "width": (N,), "protrusion": (N,)}`` in eye distances
+    (:mod:`lipsync.face.measure`); NaN where no face was found.
+    """
+    from ..face import measure as M
+
+    return {"opening": M.lip_opening(points), "width": M.mouth_width(points),
+            "protrusion": M.lip_protrusion(points)}
+
+
+@functools.lru_cache(maxsize=None)
+def real_measures(name: str) -> dict:
+    """:func:`lip_measures` of a clip's own frames (its cached :func:`track`)."""
+    return lip_measures(track(name).points)
+
+
+@functools.lru_cache(maxsize=None)
+def alignment_of(name: str):
+    """lipsync's aligner on the clip's audio with its transcript (cached; warnings silenced:
+    a clip the aligner gets wrong is part of what a figure measures)."""
+    import warnings
+
+    from ..speech.align import align
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return align(str(video(name)), transcript(name))
+
+
+def phones(name: str, source: str = "align"):
+    """The clip's phones as a timeline spanning its video: ``source="align"`` from lipsync's
+    aligner with the transcript, ``"grid"`` from GRID's own word alignment (words split into
+    phones by typical durations, as the ``grid`` reader does)."""
+    n = len(track(name))
+    end = n / track(name).fps
+    if source == "align":
+        tl = alignment_of(name).phones
+    elif source == "grid":
+        from ..readers.grid import read_words
+        from ..speech.phonetise import words_to_phones
+
+        p = alignment(name)
+        tl = words_to_phones(read_words(str(p), p.read_bytes()))
+    else:
+        raise ValueError(f"unknown phone source {source!r}; valid: align, grid")
+    return tl.replace(stated_end=max(end, tl.duration))
+
+
+def correlation(a, b) -> float:
+    """Pearson's r of two per-frame series over the frames where both are finite (0 if either is flat)."""
+    import numpy as np
+
+    a, b = np.asarray(a, np.float64), np.asarray(b, np.float64)
+    ok = np.isfinite(a) & np.isfinite(b)
+    if ok.sum() < 3 or a[ok].std() == 0 or b[ok].std() == 0:
+        return 0.0
+    return float(np.corrcoef(a[ok], b[ok])[0, 1])

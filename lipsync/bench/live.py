@@ -26,7 +26,7 @@ from . import FIGURES, Context
 
 
 def _timeline(path):
-    from ..timeline import read_timeline
+    from ..readers import read_timeline
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")

@@ -17,8 +17,9 @@ import os
 from typing import Iterable, Optional, Tuple
 
 from ..phonemes import DEFAULT_MAP, MAPS, PhonemeMap, bank_viseme_timeline, load_map
-from ..timeline import READERS, Timeline, read_timeline
-from ..timing import CURVES, DEFAULT_CURVE
+from ..readers import READERS, read_timeline
+from ..timeline import Timeline
+from ..timing import DEFAULT_CURVE, timing_names
 
 DEFAULT_MOHO_FPS = 24.0
 
@@ -53,6 +54,13 @@ def check_png(path: str) -> None:
         raise InputError(f"output must be a .png file, got {path!r}")
 
 
+#: --timing's help, shared by every command that has the option.
+TIMING_HELP = (f"how the mouth moves: a transition curve of the rule-based sequencer "
+               f"({', '.join(n for n in timing_names() if n != 'dominance')}) or 'dominance' "
+               f"(coarticulation fitted to real speech); default: the bank's 'timing' in bank.yaml, "
+               f"else {DEFAULT_CURVE}")
+
+
 def add_timeline_options(parser: argparse.ArgumentParser) -> None:
     """Add --timeline-format, --tier, --sample-rate, --moho-fps, --text, --map and --timing to ``parser``."""
     group = parser.add_argument_group("timeline input")
@@ -71,9 +79,8 @@ def add_timeline_options(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--map", default=DEFAULT_MAP, metavar="NAME_OR_FILE",
                        help=f"phoneme-to-viseme map: a shipped name ({', '.join(MAPS.names())}) "
                             f"or a YAML file (default: {DEFAULT_MAP})")
-    group.add_argument("--timing", choices=CURVES.names(), default=DEFAULT_CURVE, metavar="NAME",
-                       help=f"timing curve of transitions: {', '.join(CURVES.names())} "
-                            f"(default: {DEFAULT_CURVE})")
+    group.add_argument("--timing", choices=timing_names(), default=None, metavar="NAME",
+                       help=TIMING_HELP)
 
 
 def load_viseme_timeline(args: argparse.Namespace, *, rest: Optional[str] = None,

@@ -12,6 +12,7 @@ _PHOTO_ONLY = {"template": "toon", "names": [], "face_box": None, "layout": "aut
 def add_video_options(p: argparse.ArgumentParser) -> None:
     """Add --video, --text, --map, --size and --quiet to the ``init`` parser."""
     from ..phonemes import DEFAULT_MAP, MAPS
+    from ._common import add_jobs_option, add_quiet_option
     from ..videobank.config import DEFAULT_MAX_SIDE
 
     g = p.add_argument_group("a new subject from video (DIR is the bank folder to make)")
@@ -27,9 +28,8 @@ def add_video_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--size", default=None, metavar="WxH",
                    help=f"size of the bank's pictures (default: the video's scale, longer side at most "
                         f"{DEFAULT_MAX_SIDE})")
-    g.add_argument("--jobs", "-j", type=int, default=None, metavar="N",
-                   help="processes for the flows (default: all cores)")
-    g.add_argument("--quiet", "-q", action="store_true", help="no progress bars or summary")
+    add_jobs_option(g, "the flows")
+    add_quiet_option(g)
 
 
 def run_video(args: argparse.Namespace) -> int:

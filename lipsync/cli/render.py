@@ -1,4 +1,4 @@
-"""``lipsync render``: a timeline file to an mp4 (with the speech audio) or a PNG sequence."""
+"""``lipsync render``: a timeline file to a video (with the speech audio), an animation or a PNG sequence."""
 
 from __future__ import annotations
 
@@ -12,21 +12,35 @@ from ._common import add_bank_option, add_jobs_option, add_quiet_option, add_sto
 
 
 def add_parser(sub) -> None:
-    p = sub.add_parser("render", help="render a timeline to an mp4 (or PNG frames)",
+    p = sub.add_parser("render", help="render a timeline to a video (mp4, webm, mov), an animation or PNG frames",
                        description="Read a phoneme or viseme timeline, map it to visemes, sequence it and "
                                    "render every frame by morphing along the cached flows.")
     p.add_argument("timeline", metavar="TIMELINE", help="timeline file (.phn, .TextGrid, Gentle .json, "
                                                         "Rhubarb .tsv/.json/.xml, Moho .dat, Audacity .txt), "
                                                         "or speech audio (.wav, .mp3, ...: aligned, then "
                                                         "muxed; --text gives its transcript)")
-    p.add_argument("-o", "--output", required=True, metavar="OUT", help="output .mp4, or a folder for PNG frames")
+    p.add_argument("-o", "--output", required=True, metavar="OUT",
+                   help="output .mp4, .webm (VP9 + alpha), .mov (ProRes 4444 + alpha), .webp, .gif, or a folder for "
+                        "PNG frames (RGBA for a transparent bank)")
     add_bank_option(p)
     p.add_argument("--audio", default=None, metavar="FILE", help="speech audio to mux (wav, flac, mp3, ...)")
-    p.add_argument("--fps", type=float, default=DEFAULT_FPS, metavar="N", help=f"frames per second (default: {DEFAULT_FPS:g})")
+    p.add_argument("--fps", type=float, default=DEFAULT_FPS, metavar="N",
+                   help=f"frames per second (default: {DEFAULT_FPS:g})")
     p.add_argument("--method", choices=METHODS.names(), default="flow",
                    help="in-between method (default: flow)")
     p.add_argument("--format", choices=ENCODERS.names(), default=None,
-                   help="output format (default: from OUT: a folder or no extension -> png, .mp4 -> mp4)")
+                   help="output format (default: from OUT's extension; a folder -> png)")
+    g = p.add_argument_group("transparency and composite")
+    g.add_argument("--background", default=None, metavar="COLOR|IMAGE",
+                   help="flatten transparency onto a colour (white, #rrggbb, r,g,b) or an image; without it a "
+                        "transparent bank keeps its alpha where the format has one and is flattened onto white "
+                        "(or the body) in mp4")
+    g.add_argument("--over", default=None, metavar="IMAGE",
+                   help="draw the mouth on this body image (the whole character talking; overrides bank.yaml's "
+                        "composite: image)")
+    g.add_argument("--at", default=None, metavar="X,Y", help="body pixel where the mouth image's centre goes")
+    g.add_argument("--scale", type=float, default=None, metavar="S", help="mouth size on the body (default: 1)")
+    g.add_argument("--mouth-only", action="store_true", help="ignore bank.yaml's composite: render the mouth alone")
     p.add_argument("--crf", type=int, default=DEFAULT_CRF, help=f"H.264 quality, lower is better (default: {DEFAULT_CRF})")
     p.add_argument("--preset", default=DEFAULT_PRESET,
                    help=f"x264 speed preset: x264's (ultrafast ... veryslow) or talking-head (default: {DEFAULT_PRESET})")
@@ -38,12 +52,21 @@ def add_parser(sub) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..clip import render_clip
+    from .._data import default_bank_dir
+    from ..bank import Bank
+    from ..clip import composite_from_options, load_background, render_clip
+    from ..errors import InputError
 
-    report = render_clip(args.timeline, args.output, bank=args.bank, audio=args.audio, fps=args.fps,
+    if args.mouth_only and (args.over or args.at or args.scale is not None):
+        raise InputError("--mouth-only renders the mouth alone: it cannot be combined with --over/--at/--scale")
+    background = load_background(args.background) if args.background is not None else None
+    bank = Bank.load(args.bank or default_bank_dir())
+    composite = False if args.mouth_only else \
+        composite_from_options(bank.composite, over=args.over, at=args.at, scale=args.scale)
+    report = render_clip(args.timeline, args.output, bank=bank, audio=args.audio, fps=args.fps,
                          map=args.map, method=args.method, timing=args.timing, format=args.format,
                          crf=args.crf, preset=args.preset, store=args.store, jobs=args.jobs,
-                         quiet=args.quiet, timeline_options=args)
+                         quiet=args.quiet, timeline_options=args, background=background, composite=composite)
     if not args.quiet:
         print(report.summary(), file=sys.stderr)
     return 0

@@ -6,13 +6,13 @@ import argparse
 import sys
 
 from ..render import METHODS
-from ..timing import CURVES, DEFAULT_CURVE
-from ._common import add_bank_option, add_quiet_option, add_store_option
+from ..timing import timing_names
+from ._common import TIMING_HELP, add_bank_option, add_quiet_option, add_store_option
 
 
 def add_parser(sub) -> None:
     from ..server import (DEFAULT_IDLE_TIMEOUT_S, DEFAULT_MAX_SESSIONS, DEFAULT_MAX_UPLOAD, DEFAULT_QUALITY)
-    from ..sequencer import DEFAULT_FPS
+    from ..frames import DEFAULT_FPS
     from ..server.protocol import FPS_CHOICES
 
     p = sub.add_parser("serve", help="serve render jobs and live talking heads (HTTP + WebSocket, demo page)",
@@ -37,8 +37,7 @@ def add_parser(sub) -> None:
                    help="renderer threads shared by all sessions (default: one per core)")
     p.add_argument("--method", choices=METHODS.names(), default="flow", help="in-between method (default: flow)")
     p.add_argument("--map", default=None, metavar="NAME_OR_FILE", help="phoneme-to-viseme map")
-    p.add_argument("--timing", choices=CURVES.names(), default=DEFAULT_CURVE, metavar="NAME",
-                   help=f"transition timing curve (default: {DEFAULT_CURVE})")
+    p.add_argument("--timing", choices=timing_names(), default=None, metavar="NAME", help=TIMING_HELP)
     add_store_option(p)
     add_quiet_option(p)
     p.set_defaults(func=run)

@@ -11,7 +11,8 @@ from __future__ import annotations
 import argparse
 import sys
 
-from ..sequencer import DEFAULT_FPS, FPS_RANGE, describe, plan_segments, sequence
+from ..frames import DEFAULT_FPS
+from ..sequencer import FPS_RANGE, describe, plan_segments, sequence
 from ._common import add_timeline_options, load_viseme_timeline
 
 
@@ -34,7 +35,9 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
 
 def run(args: argparse.Namespace) -> int:
     """Print the viseme track (and the frame schedule); returns the exit code."""
+    from ..coarticulation import viseme_classes
     from ..sequencer import check_fps
+    from ..timing import DEFAULT_CURVE
 
     fps = check_fps(args.fps)
     timeline, pmap = load_viseme_timeline(args)
@@ -45,8 +48,10 @@ def run(args: argparse.Namespace) -> int:
     for start, end, viseme in plan_segments(timeline, rest=rest, closures=pmap.closures):
         out.write(f"{start:.3f}\t{end:.3f}\t{viseme}\n")
     if args.frames:
-        specs = sequence(timeline, fps=fps, rest=rest, timing=args.timing, closures=pmap.closures)
-        out.write(f"# {len(specs)} frames at {fps:g} fps, timing {args.timing}: frame, time, from, to, alpha\n")
+        timing = args.timing or DEFAULT_CURVE   # no bank here: nothing else to take it from
+        specs = sequence(timeline, fps=fps, rest=rest, timing=timing, closures=pmap.closures,
+                         classes=viseme_classes(pmap, rest))
+        out.write(f"# {len(specs)} frames at {fps:g} fps, timing {timing}: frame, time, from, to, alpha\n")
         if specs:
             out.write(describe(specs, fps) + "\n")
     return 0

@@ -496,7 +496,8 @@ def make_app(editor: Editor, session: Session, *, max_body: int = MAX_BODY):
         frame, method = d.render(a, b, alpha)
         import cv2
 
-        ok, png = cv2.imencode(".png", cv2.cvtColor(frame, cv2.COLOR_RGB2BGR), [cv2.IMWRITE_PNG_COMPRESSION, 1])
+        to_bgr = cv2.COLOR_RGBA2BGRA if frame.shape[2] == 4 else cv2.COLOR_RGB2BGR  # PNG keeps alpha
+        ok, png = cv2.imencode(".png", cv2.cvtColor(frame, to_bgr), [cv2.IMWRITE_PNG_COMPRESSION, 1])
         return Response(png.tobytes(), media_type="image/png",
                         headers={"X-Lipsync-Method": method, "X-Lipsync-Version": str(d.version),
                                  "Cache-Control": "no-store"})

@@ -1,13 +1,20 @@
-"""Stream RGB frames to a video (with optional audio) or a numbered PNG sequence.
+"""Stream RGB or RGBA frames to a video (with optional audio), an animation or a PNG sequence.
 
-One module per output kind, each registering its writer in :data:`ENCODERS`:
+One module per output kind, each registering its writer(s) in :data:`ENCODERS` (name:
+extensions; alpha: whether RGBA frames keep their transparency):
 
-===================  =========================================================================
-module               output
-===================  =========================================================================
-:mod:`.mp4`          H.264 in .mp4/.m4v/.mov/.mkv, AAC audio (the default)
-:mod:`.png`          a folder of ``frame_000000.png`` ... (no audio)
-===================  =========================================================================
+=============  ==================  =====  ======================================================
+module         name: extensions    alpha  output
+=============  ==================  =====  ======================================================
+:mod:`.mp4`    mp4: .mp4 .m4v .mkv  no    H.264, AAC audio (the default; H.264 in .mov with
+                                          ``format="mp4"``)
+:mod:`.png`    png: a folder        yes   ``frame_000000.png`` ... (no audio)
+:mod:`.webm`   webm: .webm          yes   VP9 (``yuva420p``), Opus audio
+:mod:`.mov`    mov: .mov            yes   ProRes 4444 (``yuva444p10le``), PCM audio
+:mod:`.mov`    qtrle                yes   QuickTime Animation (lossless RLE), PCM audio
+:mod:`.webp`   webp: .webp          yes   animated WebP, looping (no audio)
+:mod:`.gif`    gif: .gif            1-bit animated GIF, one palette, looping (no audio)
+=============  ==================  =====  ======================================================
 
 :mod:`.base` holds the writer protocol and the registry, :mod:`.ffmpeg` the plumbing every
 video writer shares (the bundled ffmpeg as a subprocess, audio muxing, error reporting) and
@@ -53,9 +60,25 @@ from .ffmpeg import probe
 # Importing the writers' modules registers them, in this order (the CLI lists them so).
 from .mp4 import X264_PRESETS, Mp4Writer
 from .png import PngWriter
+from .webm import WebmWriter
+from .mov import AnimationWriter, ProresWriter
+from .webp import WebpWriter
+from .gif import GifWriter
 
-__all__ = ["ENCODERS", "EncodeError", "Writer", "Mp4Writer", "PngWriter", "open_writer", "format_for", "probe",
-           "X264_PRESETS"]
+__all__ = ["ENCODERS", "EncodeError", "Writer", "Mp4Writer", "PngWriter", "WebmWriter", "ProresWriter",
+           "AnimationWriter", "WebpWriter", "GifWriter", "open_writer", "format_for", "probe", "X264_PRESETS",
+           "has_alpha"]
+
+
+def has_alpha(format: str) -> bool:
+    """Whether the output format ``format`` (an :data:`ENCODERS` name) keeps transparency.
+
+    Examples
+    --------
+    >>> has_alpha("webm"), has_alpha("mp4")
+    (True, False)
+    """
+    return bool(ENCODERS.get(format).alpha)
 
 
 def format_for(out: PathLike) -> str:
@@ -66,8 +89,8 @@ def format_for(out: PathLike) -> str:
 
     Examples
     --------
-    >>> format_for("talk.mp4"), format_for("frames/"), format_for("clip.MOV")
-    ('mp4', 'png', 'mp4')
+    >>> format_for("talk.mp4"), format_for("frames/"), format_for("clip.MOV"), format_for("a.webm")
+    ('mp4', 'png', 'mov', 'webm')
     """
     text = os.fspath(out)
     if text.endswith(("/", os.sep)) or os.path.isdir(text):
@@ -86,22 +109,25 @@ def format_for(out: PathLike) -> str:
 def open_writer(out: PathLike, *, fps: float, size: Tuple[int, int], format: Optional[str] = None,
                 audio: Optional[PathLike] = None, crf: int = 18, preset: str = "medium",
                 quiet: bool = False, total: Optional[int] = None, frames: Optional[int] = None,
-                threads: Optional[int] = None) -> Writer:
+                threads: Optional[int] = None, channels: int = 3) -> Writer:
     """Open a streaming writer for ``out``.
 
     Parameters
     ----------
     out : path-like
-        Output file (``.mp4``, ``.m4v``, ``.mov``, ``.mkv``) or folder for a PNG sequence.
+        Output file (``.mp4``, ``.m4v``, ``.mkv``, ``.webm``, ``.mov``, ``.webp``, ``.gif``)
+        or folder for a PNG sequence.
     fps : float
         Frames per second.
     size : (int, int)
-        ``(width, height)``; every frame must be a ``uint8`` array ``(height, width, 3)``.
+        ``(width, height)``; every frame must be a ``uint8`` array ``(height, width, channels)``.
     format : str, optional
-        An :data:`ENCODERS` name ("mp4", "png"); default: chosen by :func:`format_for`.
+        An :data:`ENCODERS` name ("mp4", "png", "webm", "mov", "qtrle", "webp", "gif");
+        default: chosen by :func:`format_for`.
     audio : path-like, optional
-        Sound to mux as AAC (mp4 only), starting at the first frame, padded or cut to the
-        video's duration ``n_frames / fps``.
+        Sound to mux (AAC in mp4, Opus in WebM, PCM in MOV; the others have no audio track
+        and warn), starting at the first frame, padded or cut to the video's duration
+        ``n_frames / fps``.
     crf, preset : int, str
         libx264 quality (lower is better; 18 is visually lossless for drawn faces) and speed:
         an x264 preset or a name in :data:`X264_PRESETS`.
@@ -113,7 +139,9 @@ def open_writer(out: PathLike, *, fps: float, size: Tuple[int, int], format: Opt
         The exact number of frames that will be written (mp4 with audio: video and audio
         are then encoded by one ffmpeg process; writing another number is an error).
     threads : int, optional
-        x264 encoding threads (mp4; default: x264's own choice, 1.5 per core).
+        Encoder threads (mp4, webm; default: the encoder's own choice).
+    channels : {3, 4}
+        RGB frames, or RGBA with straight alpha (formats with alpha only: see :func:`has_alpha`).
 
     Returns
     -------
@@ -142,7 +170,7 @@ def open_writer(out: PathLike, *, fps: float, size: Tuple[int, int], format: Opt
     """
     name = format if format is not None else format_for(out)
     cls = ENCODERS.get(name)
-    kwargs: Dict[str, Any] = dict(fps=fps, size=size, audio=audio, quiet=quiet, total=total)
+    kwargs: Dict[str, Any] = dict(fps=fps, size=size, audio=audio, quiet=quiet, total=total, channels=channels)
     options = dict(crf=crf, preset=preset, frames=frames, threads=threads)
     kwargs.update((k, v) for k, v in options.items() if k in cls.options)
     return cls(out, **kwargs)

@@ -78,7 +78,7 @@ def check_output_folder(folder: str, out: str) -> None:
 
 
 class Writer:
-    """Base class of the encoders: a context manager taking RGB ``uint8`` frames.
+    """Base class of the encoders: a context manager taking RGB (or RGBA) ``uint8`` frames.
 
     Subclasses implement ``_start``, ``_write_payload``, ``_finish`` and ``_cleanup`` (and
     ``prepare`` when a frame needs encoding work before it is written); this class validates
@@ -97,11 +97,14 @@ class Writer:
     fps : float
         Frames per second (> 0).
     size : (int, int)
-        Frame ``(width, height)`` in pixels; frames are arrays of shape ``(height, width, 3)``.
+        Frame ``(width, height)`` in pixels; frames are arrays of shape ``(height, width, channels)``.
     quiet : bool
         Hide the progress counter.
     total : int, optional
         Expected frame count, for the progress bar only.
+    channels : {3, 4}
+        RGB frames, or RGBA with straight alpha (only writers whose :attr:`alpha` is True:
+        an opaque format needs the frames flattened first, see :func:`lipsync.alpha.flatten`).
 
     Examples
     --------
@@ -115,13 +118,24 @@ class Writer:
     """
 
     extension = ""
+    #: Whether the format stores transparency (``channels=4`` frames).
+    alpha = False
+    #: Whether the container carries a sound track (``audio=`` is muxed, else warned about).
+    audio_track = False
     #: Keyword options of :func:`lipsync.encode.open_writer` this writer takes beyond the
     #: common ones (``fps``, ``size``, ``audio``, ``quiet``, ``total``).
     options: Tuple[str, ...] = ()
 
     def __init__(self, out: PathLike, *, fps: float, size: Tuple[int, int], quiet: bool = False,
-                 total: Optional[int] = None):
+                 total: Optional[int] = None, channels: int = 3):
         self.out = os.path.abspath(os.fspath(out).rstrip("/\\") or os.fspath(out))
+        if channels not in (3, 4):
+            raise ValueError(f"channels must be 3 (RGB) or 4 (RGBA), got {channels!r}")
+        if channels == 4 and not self.alpha:
+            raise ValueError(f"{self.out}: {type(self).__name__} stores no alpha; flatten RGBA frames onto a "
+                             f"background first (lipsync.alpha.flatten) or write a format with alpha "
+                             f"({', '.join(n for n, c in ENCODERS.items() if c.alpha)})")
+        self.channels = channels
         if not (isinstance(fps, (int, float, Fraction)) and float(fps) > 0 and np.isfinite(float(fps))):
             raise ValueError(f"fps must be a positive number, got {fps!r}")
         width, height = (int(v) for v in size)
@@ -174,15 +188,15 @@ class Writer:
         return False
 
     def write(self, frame: np.ndarray) -> None:
-        """Append one frame: an RGB ``uint8`` array of shape ``(height, width, 3)``."""
+        """Append one frame: a ``uint8`` array of shape ``(height, width, channels)``."""
         if self.closed:
             raise ValueError(f"write to a closed writer for {self.out}")
         frame = np.asarray(frame)
         width, height = self.size
-        if frame.dtype != np.uint8 or frame.shape != (height, width, 3):
+        if frame.dtype != np.uint8 or frame.shape != (height, width, self.channels):
             self._abort()
             raise ValueError(
-                f"frame {self.n_frames} for {self.out}: expected uint8 of shape {(height, width, 3)} "
+                f"frame {self.n_frames} for {self.out}: expected uint8 of shape {(height, width, self.channels)} "
                 f"(size={self.size} is width, height), got {frame.dtype} {frame.shape}"
             )
         try:

@@ -25,6 +25,7 @@ import os
 import re
 import subprocess
 import tempfile
+import warnings
 from fractions import Fraction
 from typing import Any, Dict, List, Optional, Tuple, Union
 
@@ -34,7 +35,7 @@ from ..errors import InputError, PathLike
 from . import base as _base
 from .base import STDERR_TAIL_CHARS, EncodeError, Writer, disk_full
 
-__all__ = ["ffmpeg_exe", "PipeWriter", "check_audio", "probe"]
+__all__ = ["ffmpeg_exe", "PipeWriter", "RgbPipeWriter", "check_audio", "probe"]
 
 # Seconds to let a failing ffmpeg exit on its own (so its stderr is complete) before killing it.
 FFMPEG_EXIT_WAIT = 5.0
@@ -126,6 +127,7 @@ class PipeWriter(Writer):
     """
 
     options: Tuple[str, ...] = ("frames",)
+    audio_track = True
     #: ffmpeg arguments encoding the audio track.
     audio_args: Tuple[str, ...] = ("-c:a", "aac", "-b:a", AAC_BITRATE)
     #: (extension, muxer) of the video-only file made before the audio is muxed (two-pass
@@ -133,7 +135,13 @@ class PipeWriter(Writer):
     intermediate: Optional[Tuple[str, str]] = None
 
     def __init__(self, out: PathLike, *, fps: float, size: Tuple[int, int], audio: Optional[PathLike] = None,
-                 quiet: bool = False, total: Optional[int] = None, frames: Optional[int] = None):
+                 quiet: bool = False, total: Optional[int] = None, frames: Optional[int] = None,
+                 channels: int = 3):
+        if audio is not None and not self.audio_track:
+            check_audio(audio)
+            warnings.warn(f"{out}: this format has no audio track; {os.fspath(audio)} was not used",
+                          stacklevel=3)
+            audio = None
         self.audio = check_audio(audio) if audio is not None else None
         if frames is not None and int(frames) < 1:
             raise ValueError(f"frames must be a positive count, got {frames!r}")
@@ -144,7 +152,7 @@ class PipeWriter(Writer):
         self._stderr = None
         self._temps: List[str] = []
         self._payload_bytes = 0
-        super().__init__(out, fps=fps, size=size, quiet=quiet, total=total)
+        super().__init__(out, fps=fps, size=size, quiet=quiet, total=total, channels=channels)
 
     # -- subclass hooks -------------------------------------------------------------------
     def _container(self, ext: str) -> Tuple[str, bool]:
@@ -292,6 +300,34 @@ class PipeWriter(Writer):
         if self._stderr is not None:
             self._stderr.close()
             self._stderr = None
+
+
+class RgbPipeWriter(PipeWriter):
+    """A :class:`PipeWriter` sending the frames as they are (``rgb24``, or ``rgba`` with
+    straight alpha); ffmpeg converts them for the codec (see :func:`to_yuv`)."""
+
+    def _input_args(self) -> List[str]:
+        width, height = self.size
+        self._payload_bytes = width * height * self.channels
+        return ["-f", "rawvideo", "-pix_fmt", "rgba" if self.channels == 4 else "rgb24", "-s", f"{width}x{height}"]
+
+    def prepare(self, frame: np.ndarray, out=None) -> np.ndarray:
+        """The frame itself: it is written before its buffer is used again."""
+        return np.ascontiguousarray(frame)
+
+
+def to_yuv(pix_fmt: str) -> List[str]:
+    """ffmpeg arguments converting RGB(A) input to ``pix_fmt`` with the BT.709 matrix, tv range,
+    and tagging the stream so (as :mod:`lipsync.yuv` does for mp4: swscale's own default
+    would be BT.601, shifting colours in every player that reads the tags).
+
+    Examples
+    --------
+    >>> to_yuv("yuva420p")[:2]
+    ['-vf', 'scale=out_color_matrix=bt709:out_range=tv,format=yuva420p']
+    """
+    return ["-vf", f"scale=out_color_matrix=bt709:out_range=tv,format={pix_fmt}",
+            "-color_primaries", "bt709", "-color_trc", "bt709", "-colorspace", "bt709", "-color_range", "tv"]
 
 
 # -- reading back --------------------------------------------------------------------------

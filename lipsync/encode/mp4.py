@@ -1,4 +1,4 @@
-"""H.264 in an mp4 (or .m4v/.mov/.mkv) container: the default output.
+"""H.264 in an mp4 (or .m4v/.mkv, or with ``--format mp4`` a .mov) container: the default output.
 
 The ffmpeg binary bundled with imageio-ffmpeg reads raw ``yuv420p`` frames on stdin,
 converted from RGB in this process (:mod:`lipsync.yuv`, BT.709 limited range): H.264
@@ -81,11 +81,12 @@ class Mp4Writer(PipeWriter):
 
     def __init__(self, out: PathLike, *, fps: float, size: Tuple[int, int], audio: Optional[PathLike] = None,
                  crf: int = 18, preset: str = "medium", quiet: bool = False, total: Optional[int] = None,
-                 frames: Optional[int] = None, threads: Optional[int] = None):
+                 frames: Optional[int] = None, threads: Optional[int] = None, channels: int = 3):
         self.crf = int(crf)
         self.preset = str(preset)
         self.threads = None if threads is None else max(1, int(threads))
-        super().__init__(out, fps=fps, size=size, audio=audio, quiet=quiet, total=total, frames=frames)
+        super().__init__(out, fps=fps, size=size, audio=audio, quiet=quiet, total=total, frames=frames,
+                         channels=channels)
 
     def _container(self, ext: str) -> Tuple[str, bool]:
         return CONTAINERS.get(ext, ("mp4", True))
@@ -126,4 +127,6 @@ class Mp4Writer(PipeWriter):
         return self._to_yuv(frame, out)
 
 
-ENCODERS.register("mp4", Mp4Writer, extensions=tuple(CONTAINERS), aliases=("h264", "mov", "mkv"))
+# .mov itself belongs to the "mov" format (ProRes 4444, with alpha); H.264 in a MOV is
+# still there with --format mp4.
+ENCODERS.register("mp4", Mp4Writer, extensions=tuple(e for e in CONTAINERS if e != ".mov"), aliases=("h264", "mkv"))

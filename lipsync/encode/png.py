@@ -1,4 +1,4 @@
-"""A numbered PNG sequence in a folder (lossless; no audio).
+"""A numbered PNG sequence in a folder (lossless; RGBA frames keep their alpha; no audio).
 
 Frame ``i`` (0-based, so it shows time ``i / fps``) is ``OUT/frame_000000.png`` etc. If
 ``OUT`` already exists it must be empty or hold only files named like our frames (a previous
@@ -45,14 +45,16 @@ class PngWriter(Writer):
     ['frame_000000.png', 'frame_000001.png']
     """
 
+    alpha = True
+
     def __init__(self, out: PathLike, *, fps: float, size: Tuple[int, int], audio: Optional[PathLike] = None,
-                 quiet: bool = False, total: Optional[int] = None, **_ignored: Any):
+                 quiet: bool = False, total: Optional[int] = None, channels: int = 3, **_ignored: Any):
         if audio is not None:
             check_audio(audio)
             warnings.warn(f"{out}: a PNG sequence has no audio track; {os.fspath(audio)} was not used",
                           stacklevel=3)
         self._tmp: Optional[str] = None
-        super().__init__(out, fps=fps, size=size, quiet=quiet, total=total)
+        super().__init__(out, fps=fps, size=size, quiet=quiet, total=total, channels=channels)
 
     def _start(self) -> None:
         if os.path.exists(self.out):
@@ -79,7 +81,8 @@ class PngWriter(Writer):
         """The PNG file's bytes for ``frame`` (compression runs on the caller's thread)."""
         import cv2
 
-        ok, buf = cv2.imencode(".png", frame[:, :, ::-1])
+        # RGB(A) -> BGR(A), OpenCV's order (the alpha stays last)
+        ok, buf = cv2.imencode(".png", frame[:, :, [2, 1, 0, 3]] if frame.shape[2] == 4 else frame[:, :, ::-1])
         if not ok:  # pragma: no cover - cv2 only fails on invalid arrays, checked in write()
             raise EncodeError("PNG encoding failed", path=self.out)
         return buf

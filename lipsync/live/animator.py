@@ -27,12 +27,13 @@ from typing import List, Optional, Tuple, Union
 import numpy as np
 
 from ..bank import Bank
+from ..coarticulation import resolve_timing, viseme_classes
 from ..errors import InputError, TimelineError
 from ..phonemes import DEFAULT_MAP, PhonemeMap, bank_viseme_timeline, check_map_against, load_map
-from ..sequencer import DEFAULT_FPS, FrameSpec
+from ..frames import DEFAULT_FPS
+from ..sequencer import FrameSpec
 from ..store import FlowStore
 from ..timeline import PHONEME, VISEME, Segment, Timeline
-from ..timing import DEFAULT_CURVE
 from .causal import LOOKAHEAD_S, CausalSequencer
 from .pool import RendererPool
 
@@ -65,14 +66,17 @@ class LiveAnimator:
         Frame rate, 1 to 120; frame n shows time n / fps.
     map : str, path-like or PhonemeMap, optional
         Phoneme-to-viseme map (default: the shipped English to Rhubarb-shapes map).
-    timing : str or callable
-        Transition timing curve.
+    timing : str, callable or DominanceParams, optional
+        How the mouth moves, as for :class:`lipsync.Animator` (default: the bank's timing,
+        else ``sqrt-fast-middle``).
     method : str
         Renderer method (``flow``, ``splat``, ``beier-neely``, ``dissolve``).
     lookahead : float, optional
         Seconds of pushed data past a frame's time after which the frame counts as final
-        (:attr:`final_until`, :meth:`is_final`); default :data:`LOOKAHEAD_S` (0.38 s), the
-        bound the sequencer's rules imply. It does not change which frame is shown.
+        (:attr:`final_until`, :meth:`is_final`); default: the bound the timing implies,
+        :data:`LOOKAHEAD_S` (0.38 s) for the sequencer's rules,
+        :func:`lipsync.coarticulation.lookahead` (0.177 s with the default constants) for
+        the dominance model. It does not change which frame is shown.
     store : FlowStore, optional
         Flow store (default: the bank's).
     renderer : RendererPool, optional
@@ -92,7 +96,7 @@ class LiveAnimator:
     """
 
     def __init__(self, bank: Union[Bank, str, "os.PathLike[str]"], fps: float = DEFAULT_FPS, *,
-                 map: Union[str, "os.PathLike[str]", PhonemeMap, None] = None, timing=DEFAULT_CURVE,
+                 map: Union[str, "os.PathLike[str]", PhonemeMap, None] = None, timing=None,
                  method: str = "flow", lookahead: Optional[float] = None, store: Optional[FlowStore] = None,
                  renderer: Optional[RendererPool] = None, prepare: Optional[bool] = None):
         self.bank = bank if isinstance(bank, Bank) else Bank.load(bank)
@@ -100,10 +104,12 @@ class LiveAnimator:
         self._map_path = map if isinstance(map, (str, os.PathLike)) and os.path.isfile(map) else None
         names = check_map_against(self.pmap, self.bank.names, path=self._map_path)
         self._bank_map = self.pmap.renamed(names)  # what bank_viseme_timeline hands the sequencer
-        self.lookahead = LOOKAHEAD_S if lookahead is None else float(lookahead)
+        self.timing = resolve_timing(timing, self.bank)
+        self._seq = CausalSequencer(fps=fps, rest=self.bank.rest, timing=self.timing, closures=self._bank_map.closures,
+                                    classes=viseme_classes(self._bank_map, self.bank.rest))
+        self.lookahead = self._seq.lookahead if lookahead is None else float(lookahead)
         if not (0.0 <= self.lookahead < 60.0):
             raise InputError(f"lookahead must be 0..60 s, got {lookahead!r}")
-        self._seq = CausalSequencer(fps=fps, rest=self.bank.rest, timing=timing, closures=self._bank_map.closures)
         self.fps = self._seq.fps
         self.renderer = renderer if renderer is not None else RendererPool(self.bank, method=method, store=store, size=1)
         if prepare is None:
@@ -265,12 +271,13 @@ class LiveAnimator:
         return self.spec(self.index(t))
 
     def frame(self, n: int, *, out: Optional[np.ndarray] = None) -> np.ndarray:
-        """Frame ``n`` as RGB ``uint8`` (a new array unless ``out`` is given)."""
+        """Frame ``n`` as RGB ``uint8`` (RGBA for a transparent bank; a new array unless ``out`` is given)."""
         spec = self.spec(n)
         return self.renderer.render(spec.from_viseme, spec.to_viseme, spec.alpha, out=out)
 
     def frame_at(self, t: float, *, out: Optional[np.ndarray] = None) -> np.ndarray:
-        """The frame for playback time ``t`` seconds, RGB ``uint8`` ``(H, W, 3)``.
+        """The frame for playback time ``t`` seconds, RGB ``uint8`` ``(H, W, 3)`` (RGBA ``(H, W, 4)``
+        for a bank with transparency).
 
         Uses only what has been pushed; past the data the head holds, then rests.
         """

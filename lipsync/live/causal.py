@@ -44,6 +44,18 @@ samples and the MFA and Gentle files). A run of five or more segments each short
 MIN_SEGMENT_S can in principle reach further, as shortest-first dropping is decided over
 the whole run.
 
+The dominance model
+-------------------
+With ``timing="dominance"`` (:mod:`lipsync.coarticulation`) the same window is planned with
+the model instead of rules 3-7. A sound starting at ``s`` weighs on frames after
+``s - lead - anticipation`` only, and on nothing later than its end plus its carry-over, so:
+the look-ahead is ``lead + the longest anticipation`` (:func:`lipsync.coarticulation.lookahead`,
+177 ms with the default constants), and a cut at ``c`` inside ``G`` is valid once the
+carry-over of every sound before ``G`` has ended (``c >= G.start + carry-over - lead``, and
+at least a frame in, for a closure's forced frame) and while no sound after ``G`` reaches
+back to it (``G.end - c >= look-ahead``): with the defaults, inside pauses and sounds of
+330 ms or more. No sound is dropped or held, so nothing else reaches across ``G``.
+
 Examples
 --------
 >>> cs = CausalSequencer(fps=10, rest="X")
@@ -55,12 +67,12 @@ Examples
 from __future__ import annotations
 
 import math
-from typing import Iterable, List, Optional, Tuple
+from typing import Iterable, List, Mapping, Optional, Tuple
 
 from ..sequencer import (HOLD_HALF_WIDTH_S, MAX_HELD_PAUSE_S, MAX_TRANSITION_S, FrameSpec, check_fps,
                          frame_count, frame_specs, plan_segments, plan_transitions)
 from ..timeline import VISEME, Segment, Timeline
-from ..timing import DEFAULT_CURVE, get_curve
+from ..timing import DEFAULT_CURVE, get_curve, is_model
 
 #: Data needed past a frame's time for the frame to be final (see the module docstring):
 #: a transition starts up to half a transition before its boundary, its end depends on the
@@ -90,10 +102,12 @@ class CausalSequencer:
         Frame rate, 1 to 120. Frame n shows time n / fps.
     rest : str
         The rest viseme (gaps, and the head past the data).
-    timing : str or callable
-        Transition timing curve.
+    timing : str, callable or DominanceParams
+        Transition timing curve, or the dominance model (``"dominance"`` or its constants).
     closures : iterable of str
         Visemes always shown fully (the map's closures).
+    classes : mapping, optional
+        For the dominance model: viseme -> class (default: the default map's classes).
 
     Examples
     --------
@@ -102,13 +116,30 @@ class CausalSequencer:
     FrameSpec(from_viseme='X', to_viseme='X', alpha=0.0)
     """
 
-    def __init__(self, *, fps: float, rest: str, timing=DEFAULT_CURVE, closures: Iterable[str] = ()):
+    def __init__(self, *, fps: float, rest: str, timing=DEFAULT_CURVE, closures: Iterable[str] = (),
+                 classes: Optional[Mapping[str, str]] = None):
         self.fps = check_fps(fps)
         self.rest = rest
-        self.curve = get_curve(timing)
         self.closures = frozenset(closures)
-        self._lead = max(MAX_TRANSITION_S / 2, 1.0 / self.fps)
-        self._tail = max(_LONG_S, MAX_TRANSITION_S / 2 + 1.0 / self.fps)
+        self.params = None      # the dominance model's constants, when it is the timing
+        if is_model(timing) or not (isinstance(timing, str) or callable(timing)):
+            from .. import coarticulation as co
+
+            self.params = co.as_params(timing)
+            self.curve = None
+            self.classes = classes
+            #: Seconds of data past a frame that decide it (module docstring).
+            self.lookahead = co.lookahead(self.params)
+            self._lead = max(co.carryover(self.params), 1.0 / self.fps)
+            # frames before the cut are frozen when G is pushed: no sound after G may reach them
+            self._tail = max(self.lookahead, 1.0 / self.fps)
+            self._relax_s = max(RELAX_S, co.carryover(self.params))
+        else:
+            self.curve = get_curve(timing)
+            self.lookahead = LOOKAHEAD_S
+            self._lead = max(MAX_TRANSITION_S / 2, 1.0 / self.fps)
+            self._tail = max(_LONG_S, MAX_TRANSITION_S / 2 + 1.0 / self.fps)
+            self._relax_s = RELAX_S
         self._frozen: List[FrameSpec] = []   # frames 0 .. first - 1, final
         self._cut = 0.0                      # the window starts here (= first / fps)
         self._raw: Track = []                # pushed segments from the cut on
@@ -126,8 +157,8 @@ class CausalSequencer:
 
     @property
     def final_until(self) -> float:
-        """Frames at times up to this are final (pushed data reaches LOOKAHEAD_S past them)."""
-        return self._horizon - LOOKAHEAD_S
+        """Frames at times up to this are final (pushed data reaches the look-ahead past them)."""
+        return self._horizon - self.lookahead
 
     def extend(self, segments: Iterable[Tuple[float, float, str]]) -> None:
         """Append viseme segments ``(start, end, viseme)`` in time order (gaps are rest).
@@ -168,7 +199,8 @@ class CausalSequencer:
         if n < stop:
             return self._window[n - self._first]
         if self._relax is None:
-            self._relax = self._plan(self._horizon + RELAX_S, stop, frame_count(self._horizon + RELAX_S, self.fps))
+            relax = self._horizon + self._relax_s
+            self._relax = self._plan(relax, stop, frame_count(relax, self.fps))
         if n < stop + len(self._relax):
             return self._relax[n - stop]
         return self._rest_spec
@@ -187,6 +219,15 @@ class CausalSequencer:
         if stop <= first:
             return []
         track = Timeline(tuple(Segment(s, e, v) for s, e, v in self._raw), kind=VISEME)
+        if self.params is not None:
+            from .. import coarticulation as co
+
+            segs = co.plan(track, rest=self.rest, closures=self.closures, duration=total, start=self._cut)
+            classes = self.classes
+            if classes is None:
+                classes = co.default_classes({v for _, _, v in segs}, rest=self.rest, closures=self.closures)
+            return co.dominance_frames(segs, fps=self.fps, classes=classes, params=self.params,
+                                       closures=self.closures, first=first, stop=stop)
         segs = plan_segments(track, rest=self.rest, closures=self.closures, duration=total, start=self._cut)
         windows = plan_transitions(segs)
         return frame_specs(segs, windows, fps=self.fps, curve=self.curve, closures=self.closures,

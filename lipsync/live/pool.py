@@ -45,6 +45,7 @@ class RendererPool:
     def __init__(self, bank, *, method: str = "flow", store: Optional[FlowStore] = None, size: Optional[int] = None):
         first = Renderer(bank, method=method, store=store)
         self.nb, self.store, self.method, self.shape = first.nb, first.store, first.method, first.shape
+        self.channels = first.channels
         self.bank = first.bank
         self.size = max(1, int(size or os.cpu_count() or 1))
         self._free: "queue.Queue[Renderer]" = queue.Queue()
@@ -56,7 +57,7 @@ class RendererPool:
                ) -> np.ndarray:
         """The frame at ``alpha`` between two visemes, into ``out`` (a new array if None)."""
         if out is None:
-            out = np.empty(self.shape + (3,), np.uint8)
+            out = np.empty(self.shape + (self.channels,), np.uint8)
         renderer = self._free.get()
         try:
             return renderer.render(from_viseme, to_viseme, alpha, out=out)
@@ -71,7 +72,7 @@ class RendererPool:
         """
         renderers = [self._free.get() for _ in range(self.size)]
         try:
-            out = np.empty(self.shape + (3,), np.uint8)
+            out = np.empty(self.shape + (self.channels,), np.uint8)
             for r in renderers:
                 for a, b in pairs:
                     r.render(a, b, 0.5, out=out)

@@ -9,16 +9,23 @@ are ARPAbet without stress digits, as the other readers give them; silence is ga
 
 from __future__ import annotations
 
-from ..timeline import READERS, Reader, ReadOptions, Timeline
+from ..timeline import Timeline
+from .base import READERS, Reader, ReadOptions
 
 # Magic numbers at the start of the audio containers people save speech in.
 _MAGIC = (b"RIFF", b"RF64", b"fLaC", b"OggS", b"ID3", b"\x1a\x45\xdf\xa3", b"FORM", b"caff",
           b"#!AMR", b"\x30\x26\xb2\x75")
 
 
+#: MPEG program stream (a .mpg/.vob: video with its sound), pack header start code.
+_MPEG_PS = b"\x00\x00\x01\xba"
+
+
 def sniff(head: bytes) -> bool:
     if head.startswith(b"RIFF") or head.startswith(b"RF64"):
-        return head[8:12] == b"WAVE"
+        return head[8:12] in (b"WAVE", b"AVI ")
+    if head.startswith(_MPEG_PS):
+        return True
     if head.startswith(_MAGIC):
         return True
     if head[4:8] == b"ftyp":  # mp4 / m4a

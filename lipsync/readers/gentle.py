@@ -16,7 +16,8 @@ from __future__ import annotations
 import re
 
 from ..errors import TimelineError
-from ..timeline import PHONEME, READERS, Reader, ReadOptions, Timeline
+from ..timeline import PHONEME, Timeline
+from .base import READERS, Reader, ReadOptions
 from ._common import build, json_list, json_time, line_of, sniff_text
 
 _SUFFIX = re.compile(r"_[BIES]$")

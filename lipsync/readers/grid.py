@@ -10,7 +10,7 @@ name: its rows look like TIMIT's, so content alone never picks it.
 Examples
 --------
 >>> import tempfile, os
->>> from lipsync.timeline import read_timeline
+>>> from lipsync.readers import read_timeline
 >>> d = tempfile.mkdtemp(); p = os.path.join(d, "s.align")
 >>> _ = open(p, "w").write("0 23750 sil\\r\\n23750 29500 bin\\r\\n29500 75000 sil\\r\\n")
 >>> [s.label for s in read_timeline(p)], read_timeline(p).duration
@@ -22,7 +22,8 @@ from __future__ import annotations
 import re
 
 from ..errors import TimelineError
-from ..timeline import PHONEME, READERS, Reader, ReadOptions, Timeline
+from ..timeline import PHONEME, Timeline
+from .base import READERS, Reader, ReadOptions
 from ._common import build, decode_text, first_nonblank, parse_number, sniff_text
 
 #: GRID's time unit: 25 kHz ticks (the corpus' audio was recorded at 25 kHz, 1000 ticks a frame).

@@ -124,7 +124,7 @@ def json_reader_for(path: str, data: bytes):
 
     Raises TimelineError (listing the JSON formats) for valid JSON of no known shape.
     """
-    from ..timeline import READERS
+    from .base import READERS
 
     ok, doc = _parse(data)
     if not ok:

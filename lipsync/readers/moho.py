@@ -8,7 +8,8 @@ Labels are visemes (Preston Blair names from Papagayo, A-H/X from Rhubarb).
 from __future__ import annotations
 
 from ..errors import TimelineError
-from ..timeline import READERS, VISEME, Reader, ReadOptions, Timeline
+from ..timeline import VISEME, Timeline
+from .base import READERS, Reader, ReadOptions
 from ._common import build, decode_text, first_nonblank, parse_number, sniff_text
 
 MAGIC = "MohoSwitch1"

@@ -20,7 +20,8 @@ from __future__ import annotations
 import re
 
 from ..errors import TimelineError
-from ..timeline import PHONEME, READERS, Reader, ReadOptions, Timeline
+from ..timeline import PHONEME, Timeline
+from .base import READERS, Reader, ReadOptions
 from ._common import build, decode_text, json_time, load_json, sniff_text
 from ._events import point_rows, top_array_lines, viseme_timeline
 

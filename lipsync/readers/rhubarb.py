@@ -12,7 +12,8 @@ import re
 from typing import Optional
 
 from ..errors import TimelineError
-from ..timeline import READERS, VISEME, Reader, ReadOptions, Timeline
+from ..timeline import VISEME, Timeline
+from .base import READERS, Reader, ReadOptions
 from ._common import (build, decode_text, first_nonblank, json_list, json_time, line_of, parse_number, sniff_text)
 
 _TSV_ROW = re.compile(r"\d+(\.\d+)?\t[A-Za-z]\w*")

@@ -19,7 +19,8 @@ import unicodedata
 from typing import List, NamedTuple, Optional, Tuple
 
 from ..errors import TimelineError
-from ..timeline import PHONEME, READERS, VISEME, Reader, ReadOptions, Timeline
+from ..timeline import PHONEME, VISEME, Timeline
+from .base import READERS, Reader, ReadOptions
 from ._common import build, decode_text, sniff_text
 
 DEFAULT_TIER = "phones"

@@ -9,7 +9,8 @@ from __future__ import annotations
 import re
 
 from ..errors import TimelineError
-from ..timeline import PHONEME, READERS, Reader, ReadOptions, Timeline
+from ..timeline import PHONEME, Timeline
+from .base import READERS, Reader, ReadOptions
 from ._common import build, decode_text, first_nonblank, parse_number, sniff_text
 
 _ROW = re.compile(r"\d+(\.\d+)?\s+\d+(\.\d+)?\s+\S+")

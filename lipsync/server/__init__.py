@@ -36,8 +36,7 @@ from pathlib import Path
 from typing import Optional
 
 from ..errors import InputError
-from ..sequencer import DEFAULT_FPS
-from ..timing import DEFAULT_CURVE
+from ..frames import DEFAULT_FPS
 
 STATIC = Path(__file__).resolve().parent / "static"
 SAMPLES = Path(__file__).resolve().parents[2] / "samples"
@@ -69,7 +68,7 @@ class ServeConfig:
     bank: Optional[str] = None
     store: Optional[str] = None
     map: Optional[str] = None
-    timing: str = DEFAULT_CURVE
+    timing: Optional[str] = None     # None: the bank's timing (bank.yaml), else the default curve
     method: str = "flow"
     fps: float = DEFAULT_FPS
     quality: int = DEFAULT_QUALITY
@@ -217,7 +216,7 @@ def _demo_events():
     phn = SAMPLES / "hello.phn"
     if not phn.is_file():
         return None
-    from ..timeline import read_timeline
+    from ..readers import read_timeline
 
     return [{"start": round(s.start, 6), "end": round(s.end, 6), "label": s.label, "kind": "phoneme"}
             for s in read_timeline(phn)]

@@ -61,7 +61,7 @@ class Jobs:
     def submit(self, data: bytes, name: str, *, text: Optional[str] = None, timeline_format: Optional[str] = None,
                fps: Optional[float] = None) -> Job:
         """Queue ``data`` (a timeline or audio file called ``name`` by the client)."""
-        from ..timeline import READERS
+        from ..readers import READERS
 
         ext = Path(name or "").suffix
         if ext and not _EXTENSION.match(ext):

@@ -16,6 +16,7 @@ from typing import Optional
 import cv2
 import numpy as np
 
+from ..alpha import flatten
 from ..errors import InputError
 from ..live import LiveAnimator
 from . import protocol
@@ -53,8 +54,9 @@ class LiveSession:
             self.live = LiveAnimator(s.bank, fps=self.fps, map=s.pmap, timing=s.config.timing,
                                      renderer=s.pool, prepare=False)
             h, w = self.live.shape
-            self._frame = np.empty((h, w, 3), np.uint8)
-            self._bgr = np.empty((h, w, 3), np.uint8)
+            c = self.live.renderer.channels  # 4 for a bank with transparency
+            self._frame = np.empty((h, w, c), np.uint8)
+            self._bgr = np.empty((h, w, c), np.uint8)
         return self.live
 
     async def run(self) -> None:
@@ -146,11 +148,14 @@ class LiveSession:
         # runs on the server's pool: render, convert, encode; all release the GIL
         final = live.is_final(n / live.fps)
         live.frame(n, out=self._frame)
-        cv2.cvtColor(self._frame, cv2.COLOR_RGB2BGR, dst=self._bgr)
-        if fmt == "webp":
+        rgba = self._frame.shape[2] == 4
+        cv2.cvtColor(self._frame, cv2.COLOR_RGBA2BGRA if rgba else cv2.COLOR_RGB2BGR, dst=self._bgr)
+        if fmt == "webp":  # WebP keeps the alpha of a transparent bank
             ok, buf = cv2.imencode(".webp", self._bgr, [cv2.IMWRITE_WEBP_QUALITY, quality])
         else:
-            ok, buf = cv2.imencode(".jpg", self._bgr, [cv2.IMWRITE_JPEG_QUALITY, quality])
+            # JPEG has no alpha: a transparent bank's frames are shown on white
+            bgr = flatten(self._bgr, (255, 255, 255)) if rgba else self._bgr
+            ok, buf = cv2.imencode(".jpg", bgr, [cv2.IMWRITE_JPEG_QUALITY, quality])
         if not ok:  # pragma: no cover - OpenCV encodes any uint8 image
             raise RuntimeError(f"could not encode frame {n} as {fmt}")
         return protocol.pack_frame(n, n / live.fps, final, buf.tobytes())

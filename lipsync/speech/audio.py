@@ -30,8 +30,11 @@ SAMPLE_RATE = 16000
 
 #: Extensions read as audio by the timeline reader and ``lipsync render`` (what people
 #: record or export speech as; ffmpeg reads many more, which ``lipsync align`` accepts).
+#: Video containers count too: their sound is the speech (``lipsync render clip.mp4 --text``
+#: after ``lipsync init --video`` renders the subject saying what the clip says).
 AUDIO_EXTENSIONS = (".wav", ".wave", ".flac", ".mp3", ".m4a", ".aac", ".ogg", ".oga", ".opus",
-                    ".webm", ".wma", ".aif", ".aiff", ".caf", ".amr", ".mka")
+                    ".webm", ".wma", ".aif", ".aiff", ".caf", ".amr", ".mka",
+                    ".mp4", ".m4v", ".mov", ".mkv", ".avi", ".mpg", ".mpeg", ".3gp")
 
 # How much of ffmpeg's stderr an error quotes: its last line says what was wrong.
 _STDERR_TAIL = 300

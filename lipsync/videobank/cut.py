@@ -1,9 +1,11 @@
 """Step 6: the finalist frames cut out of the videos, stabilised, at the bank's size.
 
-The videos are decoded a second time and only the frames asked for are kept, each warped
-at once into the bank's picture (:meth:`~lipsync.videobank.stabilise.Framing.matrix`):
-holding every frame of a 30 s video in memory would take 230 MB at 360x288 and 2 GB at
-1280x720, while decoding again costs a fraction of the tracking pass.
+The videos are decoded a second time and only the frames asked for are kept, then warped
+into the bank's picture (:meth:`~lipsync.videobank.stabilise.Framing.matrix`): holding
+every frame of a 30 s video in memory would take 230 MB at 360x288 and 2 GB at 1280x720,
+while decoding again costs a fraction of the tracking pass. The finalists' frames are kept
+as decoded while they fit :data:`RAW_BUDGET_BYTES`, so that the final crop, fitted to the
+chosen frames alone, does not need a third pass.
 
 Examples
 --------
@@ -23,6 +25,9 @@ import numpy as np
 
 from ..face.video import read_video
 
+#: Finalists' decoded frames are kept in memory up to this many bytes (54 frames of
+#: 1280x720 take 150 MB); beyond it (4K video) they are decoded once more for the final crop.
+RAW_BUDGET_BYTES = 256 * 2 ** 20
 #: Below this scale a bilinear warp would skip source pixels (aliasing: jagged hair, moiré
 #: on shirts); the frame is first shrunk with area averaging, then warped.
 AREA_BELOW = 0.75
@@ -45,8 +50,8 @@ def warp_frame(image: np.ndarray, matrix: np.ndarray, size: Tuple[int, int]) -> 
                           borderMode=cv2.BORDER_REPLICATE)
 
 
-def cut_frames(path, wanted: Mapping[int, np.ndarray], size: Tuple[int, int]) -> Dict[int, np.ndarray]:
-    """Frame index → the frame warped by its matrix into ``size``, for the frames in ``wanted``.
+def grab_frames(path, frames) -> Dict[int, np.ndarray]:
+    """Frame index → the decoded frame, for the indices in ``frames`` (read-only arrays).
 
     Raises
     ------
@@ -55,13 +60,19 @@ def cut_frames(path, wanted: Mapping[int, np.ndarray], size: Tuple[int, int]) ->
     """
     from ..errors import InputError
 
+    frames = set(frames)
     out: Dict[int, np.ndarray] = {}
-    last = max(wanted) if wanted else -1
+    last = max(frames) if frames else -1
     for i, frame in enumerate(read_video(path)):
-        if i in wanted:
-            out[i] = warp_frame(frame, wanted[i], size)
+        if i in frames:
+            out[i] = frame
         if i >= last:
             break
-    if len(out) < len(wanted):
+    if len(out) < len(frames):
         raise InputError(f"ended before frame {last} on the second reading (did it change meanwhile?)", path=path)
     return out
+
+
+def cut_frames(path, wanted: Mapping[int, np.ndarray], size: Tuple[int, int]) -> Dict[int, np.ndarray]:
+    """Frame index → the frame warped by its matrix into ``size``, for the frames in ``wanted``."""
+    return {i: warp_frame(f, wanted[i], size) for i, f in grab_frames(path, wanted).items()}

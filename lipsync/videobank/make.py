@@ -21,8 +21,11 @@ from typing import Dict, List, Mapping, Optional, Sequence
 import numpy as np
 
 from ..errors import InputError, PathLike
+from . import select, stabilise
 from .config import VideoBankConfig
 from .select import Candidate
+from .sources import Source
+from .speech import Speech
 
 
 @dataclass(frozen=True)
@@ -63,6 +66,31 @@ class VideoBankResult:
         if self.missing:
             text += "; borrowed: " + ", ".join(f"{v} <- {u}" for v, u in self.missing.items())
         return text
+
+
+@dataclass(frozen=True)
+class Footage:
+    """What the videos show, per video: the source, its speech, its face track, and each
+    frame's mapping onto the reference pose."""
+
+    sources: List[Source]
+    speeches: List[Speech]
+    tracks: list
+    regs: List["stabilise.Registration"]
+
+    @property
+    def names(self) -> str:
+        return ", ".join(s.name for s in self.sources)
+
+
+@dataclass(frozen=True)
+class Pictures:
+    """The chosen frames cut out at the bank's framing."""
+
+    chosen: Dict[str, Candidate]
+    framing: "stabilise.Framing"
+    images: Dict[tuple, np.ndarray]   # (video, frame) -> RGB picture
+    points: Dict[tuple, np.ndarray]   # (video, frame) -> mesh in the picture's pixels
 
 
 def _viseme_order(pmap) -> List[str]:
@@ -132,120 +160,183 @@ def make_bank(outdir: PathLike, videos: Sequence[PathLike], *, text: Optional[st
         r = make_bank("me", clips, texts={p: transcript(p.stem) for p in clips})
         print(r.summary())
     """
-    from tqdm import tqdm
-
-    from ..bank import Bank
-    from ..face.compare import mouth_box
-    from ..face.lines import SYMMETRIC_BELOW, face_asymmetry, face_features
-    from ..face.landmarks import FaceMesh
-    from ..face.track import track_frames
-    from ..face.video import read_video
-    from ..phonemes import load_map
-    from . import colour, select, stabilise, write
-    from .cut import cut_frames
-    from .sources import find_sources
-    from .speech import transcribe
-
     cfg = config or VideoBankConfig(**options)
     if config is not None and options:
         raise TypeError("give either config or keyword options, not both")
     outdir = Path(os.fspath(outdir))
+    from . import write
+    from ..phonemes import load_map
+    from .sources import find_sources
+
     write.check_outdir(outdir, cfg.force)
     seconds: Dict[str, float] = {}
-
-    def lap(name: str, t0: float) -> float:
-        t = time.perf_counter()
-        seconds[name] = seconds.get(name, 0.0) + t - t0
-        return t
-
-    t = time.perf_counter()
+    t0 = time.perf_counter()
     pmap = load_map(cfg.map)
-    rest = pmap.silence
-    order = _viseme_order(pmap)
     sources = find_sources(videos, text, texts=texts)
-    names = ", ".join(s.name for s in sources)
-    t = lap("probe", t)
+    seconds["probe"] = time.perf_counter() - t0
 
+    footage = observe(sources, pmap, cfg, seconds)
+    t = time.perf_counter()
+    ranked = select.rank(_candidates(footage, pmap.silence),
+                         [select.FrameMeasures.of(tr.points, tr.fps, reg.residual)
+                          for tr, reg in zip(footage.tracks, footage.regs)])
+    if pmap.silence not in ranked:
+        raise InputError(f"no face in the pauses to take the rest shape ({pmap.silence}) from", path=footage.names)
+    seconds["select"] = time.perf_counter() - t
+    t = time.perf_counter()
+    pictures = cut_and_choose(footage, {v: r[:select.FINALISTS] for v, r in ranked.items()}, cfg)
+    seconds["cut"] = time.perf_counter() - t
+    return assemble(outdir, footage, ranked, pictures, pmap, cfg, seconds)
+
+
+def _candidates(footage: Footage, rest: str) -> List[Candidate]:
+    out: List[Candidate] = []
+    for i, (sp, tr) in enumerate(zip(footage.speeches, footage.tracks)):
+        out += select.candidates(sp.visemes, video=i, fps=tr.fps, found=tr.found, rest=rest)
+    return out
+
+
+def observe(sources: List[Source], pmap, cfg: VideoBankConfig, seconds: Dict[str, float]) -> Footage:
+    """Align each video's speech, refuse footage without a pause for the rest shape, track
+    the face in every frame, and map every frame onto one reference pose."""
+    from tqdm import tqdm
+
+    from ..face.landmarks import FaceMesh
+    from ..face.track import track_frames
+    from ..face.video import read_video
+    from .speech import transcribe
+
+    names = ", ".join(s.name for s in sources)
     speeches, tracks = [], []
     mesh = FaceMesh()  # the models loaded once for every video
-    # one bar over every video's frames: each is aligned (its sound, ~1/3 of the time) and tracked
-    total = sum(max(s.info.frame_count, 1) for s in sources)
-    with tqdm(total=2 * total, desc="speech and faces", unit="frame", disable=cfg.quiet, leave=False) as bar:
-        for s in sources:
+    # one bar over every video's frames: each is aligned (its sound) and then tracked
+    counts = [max(s.info.frame_count, 1) for s in sources]
+    with tqdm(total=2 * sum(counts), desc="speech and faces", unit="frame", disable=cfg.quiet, leave=False) as bar:
+        t = time.perf_counter()
+        for s, n in zip(sources, counts):
             bar.set_postfix_str(s.name)
             speeches.append(transcribe(s, pmap, quiet=True, jobs=cfg.jobs))
-            bar.update(max(s.info.frame_count, 1))
-            t = lap("align", t)
+            bar.update(n)
+        seconds["align"] = time.perf_counter() - t
+        # before the longer work: is there a pause long enough to show the rest shape?
+        if not any(select.rest_frames(sp.visemes, i, s.info.fps, n)
+                   for sp, s, n in zip(speeches, sources, counts)
+                   for i, span in enumerate(sp.visemes) if span.label == pmap.silence):
+            raise InputError(f"no silence to take the rest shape ({pmap.silence}) from: leave a second of "
+                             f"silence, mouth closed and relaxed, before or after speaking", path=names)
+        t = time.perf_counter()
+        for s in sources:
+            bar.set_postfix_str(s.name)
             tracks.append(track_frames(read_video(s.path, info=s.info), fps=s.info.fps, size=s.info.size,
                                        source=str(s.path), mesh=mesh, progress=bar.update))
-            t = lap("track", t)
-
-    # --- stabilise: one reference pose for all videos
-    ref = stabilise.reference_pose([tr.points[tr.found][:, stabilise._STILL] for tr in tracks])
+        seconds["track"] = time.perf_counter() - t
+    ref = stabilise.reference_pose([tr.points[tr.found] for tr in tracks])
     regs = [stabilise.register_track(tr.points, tr.found, ref) for tr in tracks]
+    return Footage(sources=sources, speeches=speeches, tracks=tracks, regs=regs)
 
-    # --- select: candidates and their ranking
-    measures = [select.FrameMeasures.of(tr.points, tr.fps, reg.residual) for tr, reg in zip(tracks, regs)]
-    cands: List[Candidate] = []
-    for i, (sp, tr) in enumerate(zip(speeches, tracks)):
-        cands += select.candidates(sp.visemes, video=i, fps=tr.fps, found=tr.found, rest=rest)
-    ranked = select.rank(cands, measures)
-    if rest not in ranked:
-        raise InputError(f"no silence to take the rest shape ({rest}) from: leave a second of silence, mouth "
-                         f"closed and relaxed, before or after speaking", path=names)
-    finalists = {v: r[:select.FINALISTS] for v, r in ranked.items()}
-    t = lap("select", t)
 
-    # --- framing: the crop that every finalist fills
+def cut_and_choose(footage: Footage, finalists: Dict[str, List[Candidate]], cfg: VideoBankConfig) -> Pictures:
+    """Cut the finalists out of the videos, choose each viseme's sharpest best, and cut the
+    chosen frames again at a framing fitted to them alone (more room for the neck and
+    shoulders than all finalists share)."""
+    from ..face.compare import mouth_box
+    from .cut import RAW_BUDGET_BYTES, grab_frames, warp_frame
+
+    src, regs, tracks = footage.sources, footage.regs, footage.tracks
     flat = [c for fs in finalists.values() for c in fs]
     scale = float(np.median([1.0 / abs(regs[c.video].c[c.frame]) for c in flat]))
-    frame = stabilise.framing([(regs[c.video], c.frame, sources[c.video].info.size) for c in flat],
-                              [regs[c.video].to_unit(c.frame, tracks[c.video].points[c.frame]) for c in flat],
-                              source_scale=scale, size=cfg.size, max_side=cfg.max_side, where=names)
-    w, h = frame.size
 
-    # --- cut the finalists out of the videos, judge their sharpness, choose
-    pictures: Dict[tuple, np.ndarray] = {}
-    for i, s in enumerate(sources):
-        wanted = {c.frame: frame.matrix(regs[i], c.frame) for c in flat if c.video == i}
-        if wanted:
-            for f, img in cut_frames(s.path, wanted, (w, h)).items():
-                pictures[(i, f)] = img
-    points_out = {(c.video, c.frame): frame.points(regs[c.video], c.frame, tracks[c.video].points[c.frame])
-                  for c in flat}
+    def framing_for(cands: List[Candidate]) -> "stabilise.Framing":
+        return stabilise.framing([(regs[c.video], c.frame, src[c.video].info.size) for c in cands],
+                                 [regs[c.video].to_unit(c.frame, tracks[c.video].points[c.frame]) for c in cands],
+                                 source_scale=scale, size=cfg.size, max_side=cfg.max_side)
+
+    def points(fr: "stabilise.Framing", c: Candidate) -> np.ndarray:
+        return fr.points(regs[c.video], c.frame, tracks[c.video].points[c.frame])
+
+    def cut(fr: "stabilise.Framing", cands: List[Candidate], raw: Dict[tuple, np.ndarray], keep: bool):
+        out = {}
+        for i, s in enumerate(src):
+            wanted = sorted({c.frame for c in cands if c.video == i})
+            got = {f: raw[(i, f)] for f in wanted} if all((i, f) in raw for f in wanted) else (
+                grab_frames(s.path, wanted) if wanted else {})
+            for f, img in got.items():
+                if keep:
+                    raw[(i, f)] = img
+                out[(i, f)] = warp_frame(img, fr.matrix(regs[i], f), fr.size)
+        return out
+
+    frame = framing_for(flat)
+    w, h = frame.size
+    raw: Dict[tuple, np.ndarray] = {}
+    keep = sum(int(np.prod(src[c.video].info.size)) * 3 for c in flat) <= RAW_BUDGET_BYTES
+    images = cut(frame, flat, raw, keep)
     chosen: Dict[str, Candidate] = {}
     for v, fs in finalists.items():
-        sharp = [select.sharpness(pictures[(c.video, c.frame)], mouth_box(points_out[(c.video, c.frame)], (h, w)))
-                 for c in fs]
+        sharp = [select.sharpness(images[(c.video, c.frame)], mouth_box(points(frame, c), (h, w))) for c in fs]
         chosen[v] = select.with_sharpness(fs, sharp)[0]
-    t = lap("cut", t)
+    picked = list({(c.video, c.frame): c for c in chosen.values()}.values())
+    final = framing_for(picked)
+    if final != frame:
+        images = cut(final, picked, raw, False)
+    if final.cut:
+        warnings.warn(f"{footage.names}: the picture cuts the head at the {' and '.join(final.cut)} (keep the whole "
+                      f"head and the neck in view, with some room around them); the bank is cropped tighter",
+                      UserWarning, stacklevel=3)
+    return Pictures(chosen=chosen, framing=final, images={(c.video, c.frame): images[(c.video, c.frame)] for c in picked},
+                    points={(c.video, c.frame): points(final, c) for c in picked})
 
-    # --- visemes never shown: the nearest shape shown
+
+def assemble(outdir: Path, footage: Footage, ranked: Dict[str, List[Candidate]], pictures: Pictures, pmap,
+             cfg: VideoBankConfig, seconds: Dict[str, float]) -> VideoBankResult:
+    """Borrow shapes for visemes never shown, match the colour, place the lines, and write
+    the bank (PNGs, bank.yaml, report, preview, flows) all at once."""
+    from ..bank import Bank
+    from ..banks.yamlio import write_bank_text
+    from ..coarticulation import fit_speaker, rounded
+    from ..face.lines import SYMMETRIC_BELOW, face_asymmetry, face_features
+    from ..face.measure import lip_opening
+    from . import colour, write
+
+    t = time.perf_counter()
+    names, chosen, frame = footage.names, pictures.chosen, pictures.framing
+    w, h = frame.size
+    order = _viseme_order(pmap)
     shown = [v for v in order if v in chosen]
     missing = {v: select.nearest_available(v, shown, fallback=pmap.fallback) for v in order if v not in chosen}
     if missing:
         warnings.warn(f"{names}: never shows {_what_to_record(list(missing), pmap)}; using the closest shape "
                       f"shown ({', '.join(f'{v} <- {u}' for v, u in missing.items())}). Record these sounds too "
-                      f"(reading samples/record-script.txt aloud shows every shape)", UserWarning, stacklevel=2)
+                      f"(reading samples/record-script.txt aloud shows every shape)", UserWarning, stacklevel=3)
     source_of = {v: chosen[v] if v in chosen else chosen[missing[v]] for v in order}
 
-    # --- colour: the chosen pictures matched on the still skin
-    keys = list(dict.fromkeys((c.video, c.frame) for c in chosen.values()))
-    masks = {k: colour.still_skin_mask(points_out[k], (h, w)) for k in keys}
-    matched, gains = colour.match_colour({k: pictures[k] for k in keys}, masks, where=names)
+    # the chosen pictures matched on the still skin
+    keys = list(pictures.images)
+    masks = {k: colour.still_skin_mask(pictures.points[k], (h, w)) for k in keys}
+    matched, gains = colour.match_colour(pictures.images, masks, where=names)
 
-    # --- lines from each picture's face
-    pts = {v: points_out[(c.video, c.frame)] for v, c in source_of.items()}
+    # lines from each picture's own face
+    pts = {v: pictures.points[(c.video, c.frame)] for v, c in source_of.items()}
     asym = face_asymmetry(list(pts.values()))
     symmetric = asym < SYMMETRIC_BELOW
     features = face_features(pts, (h, w), axis=frame.axis)
-    t = lap("choose", t)
+    seconds["choose"] = time.perf_counter() - t
+
+    # how this speaker's mouth moves (issue 21): the dominance model, its constants fitted to
+    # the lips in these videos with the chosen pictures' openings (lipsync.coarticulation)
+    t = time.perf_counter()
+    fitted = fit_speaker([([(x.start, x.end, x.label) for x in sp.visemes], lip_opening(tr.points), tr.fps)
+                          for sp, tr in zip(footage.speeches, footage.tracks)],
+                         {v: float(lip_opening(p)) for v, p in pts.items()}, pmap)
+    constants = rounded(fitted) if fitted is not None else None
+    seconds["timing"] = time.perf_counter() - t
+    t = time.perf_counter()
 
     files = write.image_names(order)
     report = {
         "made_by": "lipsync init --video",
         "map": pmap.name,
-        "rest": rest,
+        "rest": pmap.silence,
         "size": [w, h],
         "pixels_per_eye_distance": round(frame.scale, 3),
         "symmetry": symmetric,
@@ -257,38 +348,41 @@ def make_bank(outdir: PathLike, videos: Sequence[PathLike], *, text: Optional[st
             "confidence": None if sp.confidence is None else round(sp.confidence, 3),
             "face_found": round(float(tr.found.mean()), 4),
             "residual_median": round(float(np.nanmedian(reg.residual)), 4),
-        } for s, sp, tr, reg in zip(sources, speeches, tracks, regs)],
+        } for s, sp, tr, reg in zip(footage.sources, footage.speeches, footage.tracks, footage.regs)],
         "visemes": {},
         "missing": {v: {"uses": u, "record": _what_to_record([v], pmap)} for v, u in missing.items()},
+        "timing": {"model": "dominance", "fitted": constants is not None,
+                   "constants": constants if constants is not None else "defaults (too little speech to fit)"},
     }
     for v in order:
         c = source_of[v]
-        report["visemes"][v] = dict(image=files[v], video=sources[c.video].name, **c.report(),
+        report["visemes"][v] = dict(image=files[v], video=footage.sources[c.video].name, **c.report(),
                                     candidates=len(ranked.get(v, [])), borrowed_from=missing.get(v),
                                     colour_gain=list(gains[(c.video, c.frame)]))
+    seconds["choose"] += time.perf_counter() - t
 
-    header = [f"# Written by lipsync init --video from {len(sources)} video(s) ({names[:200]}): one frame "
-              f"per viseme, lines placed from the face; the choice is in {write.REPORT_NAME}."]
+    header = [f"# Written by lipsync init --video from {len(footage.sources)} video(s) ({names[:200]}): one "
+              f"frame per viseme, lines placed from the face; the choice is in {write.REPORT_NAME}."]
     with write.Staging(outdir, force=cfg.force) as tmp:
+        t = time.perf_counter()
         images = {}
         for v in order:
             c = source_of[v]
-            if files[v] not in images:
-                images[files[v]] = matched[(c.video, c.frame)]
-                write.write_png(tmp / files[v], images[files[v]])
-        text_yaml = write.bank_text(outdir.resolve().name, rest, files, features, symmetric=symmetric, header=header)
+            images[files[v]] = matched[(c.video, c.frame)]
+            write.write_png(tmp / files[v], images[files[v]])
+        text_yaml = write.bank_text(outdir.resolve().name, pmap.silence, files, features, symmetric=symmetric,
+                                    header=header, timing="dominance", coarticulation=constants)
         Bank.from_text(text_yaml, tmp, images=images)  # never write a bank that would not load
-        from ..banks.yamlio import write_bank_text
-
         write_bank_text(tmp / "bank.yaml", text_yaml)
         bank = Bank.load(tmp)
         write.write_preview(tmp / write.PREVIEW_NAME, bank)
-        t = lap("write", t)
+        seconds["write"] = time.perf_counter() - t
         if cfg.flows:
             from ..preprocess import preprocess
 
+            t = time.perf_counter()
             preprocess(bank, jobs=cfg.jobs, quiet=cfg.quiet)
-            t = lap("flows", t)
+            seconds["flows"] = time.perf_counter() - t
         report["seconds"] = {k: round(x, 2) for k, x in seconds.items()}
         write.write_report(tmp / write.REPORT_NAME, report)
     return VideoBankResult(path=outdir, chosen=chosen, missing=missing, size=(w, h), symmetric=symmetric,

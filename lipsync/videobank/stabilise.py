@@ -30,7 +30,6 @@ Examples
 
 from __future__ import annotations
 
-import warnings
 from dataclasses import dataclass
 from typing import Optional, Sequence, Tuple
 
@@ -106,25 +105,26 @@ def _unit(still: np.ndarray) -> np.ndarray:
     return c * (still - (left + right) / 2)
 
 
-def reference_pose(still_points: Sequence[np.ndarray]) -> np.ndarray:
+def reference_pose(meshes: Sequence[np.ndarray]) -> np.ndarray:
     """The reference still-point shape in unit coordinates, complex ``(8,)``.
 
     Parameters
     ----------
-    still_points : sequence of numpy.ndarray
-        ``(N_i, 8, 2)`` still points (``points[:, STILL_POINTS]``) of every frame with a face.
+    meshes : sequence of numpy.ndarray
+        ``(N_i, 468, 2|3)`` meshes of every frame with a face (one array per video), or
+        just their still points ``(N_i, 8, 2)``.
 
     Examples
     --------
     >>> rng = np.random.default_rng(1)
     >>> base = rng.normal(size=(8, 2))
     >>> a = np.stack([base * s + d for s, d in ((1, 0), (2, 5), (3, -1))])
-    >>> ref = reference_pose([a])
+    >>> ref = reference_pose([a])      # three frames' still points
     >>> _, _, res = fit_similarity(_complex(a), ref)
     >>> float(res.max()) < 1e-9
     True
     """
-    z = np.concatenate([_complex(p) for p in still_points])
+    z = np.concatenate([_complex(p[:, _STILL] if p.shape[1] == 468 else p) for p in meshes])
     ref = _unit(z[0])
     for _ in range(2):  # two rounds of generalised Procrustes settle to well below a pixel
         c, t, _ = fit_similarity(z, ref)
@@ -229,8 +229,7 @@ def mirror_axis_unit(unit_points: Sequence[np.ndarray]) -> float:
 
 
 def framing(regs: Sequence[Tuple[Registration, int, Tuple[int, int]]], unit_points: Sequence[np.ndarray], *,
-            source_scale: float, size: Optional[Tuple[int, int]] = None, max_side: int = 512,
-            where: str = "video") -> Framing:
+            source_scale: float, size: Optional[Tuple[int, int]] = None, max_side: int = 512) -> Framing:
     """The crop and scale of the bank's pictures.
 
     Parameters
@@ -246,43 +245,47 @@ def framing(regs: Sequence[Tuple[Registration, int, Tuple[int, int]]], unit_poin
         ``(W, H)`` asked for: the crop is trimmed to its aspect and scaled to it.
     max_side : int
         Without ``size``: the longer side is scaled down to this.
-    where : str
-        For the warning when the picture cuts the head.
 
     Returns
     -------
     Framing
+        With ``cut`` naming the sides where the videos' pictures end before the margin the
+        face needs (the caller warns).
     """
     axis = mirror_axis_unit(unit_points)
-    left, right, top, bottom = axis - HALF_WIDTH, axis + HALF_WIDTH, -TOP, BOTTOM
+    # what the videos' pictures hold around the face, in unit coordinates: each picture's
+    # corners moved by its frame's transform, the tightest over all the frames
+    left, right, top, bottom = -np.inf, np.inf, -np.inf, np.inf
     for reg, i, (w, h) in regs:
-        # the video's picture in unit coordinates: its corners moved by the frame's transform
         corners = reg.c[i] * np.array([-0.5 - 0.5j, w - 0.5 - 0.5j, w - 0.5 + (h - 0.5) * 1j,
                                        -0.5 + (h - 0.5) * 1j]) + reg.t[i]
         left = max(left, corners[0].real, corners[3].real)
         right = min(right, corners[1].real, corners[2].real)
         top = max(top, corners[0].imag, corners[1].imag)
         bottom = min(bottom, corners[2].imag, corners[3].imag)
-    half = min(axis - left, right - axis)
-    top, bottom = -top, bottom  # distances from the eye line
-    cut = tuple(name for name, have, need in (("top", top, TOP_NEEDED), ("bottom", bottom, BOTTOM_NEEDED),
-                                              ("sides", half, HALF_WIDTH_NEEDED)) if have < need - 1e-9)
-    if cut:
-        warnings.warn(f"{where}: the picture cuts the head at the {' and '.join(cut)} (keep the whole head and "
-                      f"the neck in view, with some room around them); the bank is cropped tighter",
-                      UserWarning, stacklevel=3)
+    # room on each side of the axis, above and below the eye line
+    room_half, room_top, room_bottom = min(axis - left, right - axis), -top, bottom
+    half, top, bottom = min(HALF_WIDTH, room_half), min(TOP, room_top), min(BOTTOM, room_bottom)
     if size is not None:
         w, h = size
-        # trim the crop to the asked aspect: the sides first down to what the face needs,
-        # then the top (hair) and the bottom (shoulders) alike
         want = w / h
-        if 2 * half / (top + bottom) > want:
-            half = want * (top + bottom) / 2
+        if 2 * half / (top + bottom) < want:
+            # too tall for the asked aspect: more room at the sides where the pictures have it,
+            # else less hair, then less neck
+            half = min(room_half, want * (top + bottom) / 2)
+            extra = max(0.0, (top + bottom) - 2 * half / want)
+            from_top = min(extra, max(0.0, top - TOP_NEEDED))
+            top, bottom = top - from_top, bottom - (extra - from_top)
         else:
-            extra = (top + bottom) - 2 * half / want
-            from_top = min(extra / 2, top - TOP_NEEDED) if top > TOP_NEEDED else 0.0
-            top -= max(from_top, 0.0)
-            bottom -= extra - max(from_top, 0.0)
+            # too wide: more below (neck, shoulders), then above, where the pictures have it;
+            # else narrower
+            add = 2 * half / want - (top + bottom)
+            more = min(add, room_bottom - bottom)
+            bottom, add = bottom + more, add - more
+            more = min(add, room_top - top)
+            top, add = top + more, add - more
+            if add > 1e-9:
+                half = want * (top + bottom) / 2
         scale = w / (2 * half)
     else:
         scale = source_scale
@@ -292,6 +295,8 @@ def framing(regs: Sequence[Tuple[Registration, int, Tuple[int, int]]], unit_poin
         # even sides (video encoders subsample chroma by two)
         w = max(2, 2 * int(round(half * scale)))
         h = max(2, 2 * int(round((top + bottom) * scale / 2)))
+    cut = tuple(name for name, have, need in (("top", top, TOP_NEEDED), ("bottom", bottom, BOTTOM_NEEDED),
+                                              ("sides", half, HALF_WIDTH_NEEDED)) if have < need - 1e-9)
     # the crop exactly W/scale wide, centred on the axis; H/scale tall from the top margin
     half = w / (2 * scale)
     return Framing(origin=complex(axis - half, -top), scale=float(scale), size=(int(w), int(h)), cut=cut)

@@ -107,15 +107,21 @@ def image_names(visemes: List[str]) -> Dict[str, str]:
 
 
 def bank_text(name: str, rest: str, files: Mapping[str, str], features: Mapping[str, Mapping], *,
-              symmetric: bool, header: List[str]) -> str:
-    """bank.yaml text for the chosen pictures and their face lines."""
+              symmetric: bool, header: List[str], timing: Optional[str] = None,
+              coarticulation: Optional[Mapping] = None) -> str:
+    """bank.yaml text for the chosen pictures and their face lines (and, when given, how the
+    mouth moves: bank.yaml's ``timing`` and the speaker's fitted ``coarticulation``)."""
     from ..banks.yamlio import dump_bank
     from ..face.lines import FACE_WARP
 
     doc = {"name": name, "rest": rest, "warp": {"a": FACE_WARP.a, "b": FACE_WARP.b, "p": FACE_WARP.p},
-           "symmetry": bool(symmetric),
-           "visemes": {v: {"image": files[v], "lines": {n: f.to_yaml_value() for n, f in features[v].items()}}
-                       for v in files}}
+           "symmetry": bool(symmetric)}
+    if timing is not None:
+        doc["timing"] = timing
+    if coarticulation is not None:
+        doc["coarticulation"] = dict(coarticulation)
+    doc["visemes"] = {v: {"image": files[v], "lines": {n: f.to_yaml_value() for n, f in features[v].items()}}
+                      for v in files}
     return dump_bank(doc, header=header)
 
 

@@ -7,13 +7,14 @@ covering ``[0, duration]`` -- into text; :func:`write_cues` checks the track onc
 the file atomically (temporary file in the same folder, then rename), so a failure never
 leaves a half-written file.
 
-Round trip: :func:`lipsync.timeline.read_timeline` reads every file written here back cue
+Round trip: :func:`lipsync.readers.read_timeline` reads every file written here back cue
 for cue (times to the precision each format stores; Moho to whole frames).
 
 Examples
 --------
 >>> import os, tempfile
->>> from lipsync.timeline import Segment, Timeline, read_timeline
+>>> from lipsync.timeline import Segment, Timeline
+>>> from lipsync.readers import read_timeline
 >>> cues = Timeline((Segment(0, 0.2, "X"), Segment(0.2, 0.5, "A"), Segment(0.5, 0.8, "X")), kind="viseme")
 >>> out = os.path.join(tempfile.mkdtemp(), "cues.tsv")
 >>> write_cues(cues, out)
@@ -28,69 +29,17 @@ from __future__ import annotations
 
 import math
 import os
-from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable, FrozenSet, Iterable, List, Mapping, Optional, Sequence, Tuple, Union
+from typing import Iterable, List, Mapping, Optional, Sequence, Tuple, Union
 
 from ..errors import InputError
-from ..registry import Registry
 from ..timeline import Segment, Timeline
 
-PathLike = Union[str, "os.PathLike[str]"]
+from .base import DEFAULT_FPS, DEFAULT_TIER, WRITERS, Cue, CueOptions, PathLike, Writer
 
-Cue = Tuple[float, float, str]
+__all__ = ["DEFAULT_FPS", "DEFAULT_TIER", "WRITERS", "Cue", "CueOptions", "Writer", "cue_track", "format_for",
+           "write_cues"]
 
-#: Moho's own default, and Rhubarb's ``--datFrameRate`` default.
-DEFAULT_FPS = 24.0
-
-#: Tier name of the TextGrid writer (the TextGrid reader picks it when there is no phones tier).
-DEFAULT_TIER = "visemes"
-
-
-@dataclass(frozen=True)
-class CueOptions:
-    """What a writer may need besides the cues (one frozen config, passed keyword-only).
-
-    Parameters
-    ----------
-    duration : float
-        End of the track in seconds (the last cue's end).
-    rest : str
-        The rest (silence) viseme: Rhubarb and Moho files end with it.
-    fps : float
-        Frame rate of Moho switch files (frames are 1-based).
-    tier : str
-        TextGrid tier name.
-    sound_file : str, optional
-        The recording the cues belong to (Rhubarb's ``metadata.soundFile``).
-    names : mapping
-        Viseme -> name written, for formats with their own names (Moho: Preston Blair).
-    closures : frozenset
-        Visemes that must be shown however short (the map's closures): Moho keys them first
-        when cues share a frame.
-    """
-
-    duration: float
-    rest: str = "X"
-    fps: float = DEFAULT_FPS
-    tier: str = DEFAULT_TIER
-    sound_file: Optional[str] = None
-    names: Mapping[str, str] = field(default_factory=dict)
-    closures: FrozenSet[str] = frozenset()
-
-
-@dataclass(frozen=True)
-class Writer:
-    """A mouth-cue file format: ``render(cues, options) -> str`` (the whole file's text)."""
-
-    name: str
-    render: Callable[[Sequence[Cue], CueOptions], str]
-    description: str = ""
-    #: How close a read-back time is to the written one (seconds): the format's precision.
-    resolution: float = 1e-3
-
-
-WRITERS: Registry[Writer] = Registry("cue format")
 
 def cue_track(cues: Union[Timeline, Sequence[Cue]], *, rest: str,
               duration: Optional[float] = None) -> Tuple[List[Cue], float]:
@@ -219,5 +168,5 @@ def write_cues(cues: Union[Timeline, Sequence[Cue]], path: PathLike, format: Opt
     return writer.name
 
 
-# Each writer module registers itself; imported last because they import from this module.
+# Each writer module registers itself in WRITERS (lipsync.writers.base).
 from . import rhubarb, moho, textgrid, audacity  # noqa: E402,F401  (registration order = --format choices)

@@ -9,7 +9,7 @@ from __future__ import annotations
 from typing import Sequence
 
 from ..errors import InputError
-from . import WRITERS, Cue, CueOptions, Writer
+from .base import WRITERS, Cue, CueOptions, Writer
 
 
 def render(cues: Sequence[Cue], options: CueOptions) -> str:

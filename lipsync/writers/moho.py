@@ -23,7 +23,7 @@ from typing import List, Sequence
 
 from ..errors import InputError
 from ..readers.moho import MAGIC
-from . import WRITERS, Cue, CueOptions, Writer
+from .base import WRITERS, Cue, CueOptions, Writer
 
 # Float noise in t * fps (0.1 * 30 = 3.0000000000000004) must not move a key by a frame.
 _FRAME_EPS = 1e-6

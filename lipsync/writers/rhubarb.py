@@ -19,7 +19,7 @@ from typing import Sequence
 from xml.sax.saxutils import escape, quoteattr
 
 from ..errors import InputError
-from . import WRITERS, Cue, CueOptions, Writer
+from .base import WRITERS, Cue, CueOptions, Writer
 
 SHAPES = ("A", "B", "C", "D", "E", "F", "G", "H", "X")
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from typing import List, Sequence
 
-from . import WRITERS, Cue, CueOptions, Writer
+from .base import WRITERS, Cue, CueOptions, Writer
 
 
 def _q(text: str) -> str:
