@@ -296,21 +296,32 @@ static inline void sample8(const uint32_t *img, int wp, __m256 px, __m256 py, __
     acc[0] = _mm256_fmadd_ps(w01, _mm256_cvtepi32_ps(_mm256_and_si256(t01, m)), acc[0]);
     acc[0] = _mm256_fmadd_ps(w10, _mm256_cvtepi32_ps(_mm256_and_si256(t10, m)), acc[0]);
     acc[0] = _mm256_fmadd_ps(w11, _mm256_cvtepi32_ps(_mm256_and_si256(t11, m)), acc[0]);
-    acc[1] = _mm256_fmadd_ps(w00, LS_CH(t00, 8), acc[1]);
-    acc[1] = _mm256_fmadd_ps(w01, LS_CH(t01, 8), acc[1]);
-    acc[1] = _mm256_fmadd_ps(w10, LS_CH(t10, 8), acc[1]);
-    acc[1] = _mm256_fmadd_ps(w11, LS_CH(t11, 8), acc[1]);
     if (nch == 3) {
+        acc[1] = _mm256_fmadd_ps(w00, LS_CH(t00, 8), acc[1]);
+        acc[1] = _mm256_fmadd_ps(w01, LS_CH(t01, 8), acc[1]);
+        acc[1] = _mm256_fmadd_ps(w10, LS_CH(t10, 8), acc[1]);
+        acc[1] = _mm256_fmadd_ps(w11, LS_CH(t11, 8), acc[1]);
         /* the X byte is zero, so the top channel needs no mask */
         acc[2] = _mm256_fmadd_ps(w00, _mm256_cvtepi32_ps(_mm256_srli_epi32(t00, 16)), acc[2]);
         acc[2] = _mm256_fmadd_ps(w01, _mm256_cvtepi32_ps(_mm256_srli_epi32(t01, 16)), acc[2]);
         acc[2] = _mm256_fmadd_ps(w10, _mm256_cvtepi32_ps(_mm256_srli_epi32(t10, 16)), acc[2]);
         acc[2] = _mm256_fmadd_ps(w11, _mm256_cvtepi32_ps(_mm256_srli_epi32(t11, 16)), acc[2]);
     } else {
-        acc[2] = _mm256_fmadd_ps(w00, LS_CH(t00, 16), acc[2]);
-        acc[2] = _mm256_fmadd_ps(w01, LS_CH(t01, 16), acc[2]);
-        acc[2] = _mm256_fmadd_ps(w10, LS_CH(t10, 16), acc[2]);
-        acc[2] = _mm256_fmadd_ps(w11, LS_CH(t11, 16), acc[2]);
+        /* G and B by one byte shuffle each (instead of a shift and a mask) */
+        const __m256i g = _mm256_setr_epi8(1, -1, -1, -1, 5, -1, -1, -1, 9, -1, -1, -1, 13, -1, -1, -1,
+                                           1, -1, -1, -1, 5, -1, -1, -1, 9, -1, -1, -1, 13, -1, -1, -1);
+        const __m256i b = _mm256_setr_epi8(2, -1, -1, -1, 6, -1, -1, -1, 10, -1, -1, -1, 14, -1, -1, -1,
+                                           2, -1, -1, -1, 6, -1, -1, -1, 10, -1, -1, -1, 14, -1, -1, -1);
+#define LS_SH(t, sel) _mm256_cvtepi32_ps(_mm256_shuffle_epi8(t, sel))
+        acc[1] = _mm256_fmadd_ps(w00, LS_SH(t00, g), acc[1]);
+        acc[1] = _mm256_fmadd_ps(w01, LS_SH(t01, g), acc[1]);
+        acc[1] = _mm256_fmadd_ps(w10, LS_SH(t10, g), acc[1]);
+        acc[1] = _mm256_fmadd_ps(w11, LS_SH(t11, g), acc[1]);
+        acc[2] = _mm256_fmadd_ps(w00, LS_SH(t00, b), acc[2]);
+        acc[2] = _mm256_fmadd_ps(w01, LS_SH(t01, b), acc[2]);
+        acc[2] = _mm256_fmadd_ps(w10, LS_SH(t10, b), acc[2]);
+        acc[2] = _mm256_fmadd_ps(w11, LS_SH(t11, b), acc[2]);
+#undef LS_SH
         /* alpha is the top byte: no mask */
         acc[3] = _mm256_fmadd_ps(w00, _mm256_cvtepi32_ps(_mm256_srli_epi32(t00, 24)), acc[3]);
         acc[3] = _mm256_fmadd_ps(w01, _mm256_cvtepi32_ps(_mm256_srli_epi32(t01, 24)), acc[3]);
@@ -418,19 +429,24 @@ static inline void sample16(const uint32_t *img, int wp, __m512 px, __m512 py, _
 #define LS_C2(t) _mm512_cvtepi32_ps(_mm512_srli_epi32(t, 16))
     acc[0] = _mm512_fmadd_ps(w00, LS_C0(t00), acc[0]); acc[0] = _mm512_fmadd_ps(w01, LS_C0(t01), acc[0]);
     acc[0] = _mm512_fmadd_ps(w10, LS_C0(t10), acc[0]); acc[0] = _mm512_fmadd_ps(w11, LS_C0(t11), acc[0]);
-    acc[1] = _mm512_fmadd_ps(w00, LS_C1(t00), acc[1]); acc[1] = _mm512_fmadd_ps(w01, LS_C1(t01), acc[1]);
-    acc[1] = _mm512_fmadd_ps(w10, LS_C1(t10), acc[1]); acc[1] = _mm512_fmadd_ps(w11, LS_C1(t11), acc[1]);
     if (nch == 3) {
+        acc[1] = _mm512_fmadd_ps(w00, LS_C1(t00), acc[1]); acc[1] = _mm512_fmadd_ps(w01, LS_C1(t01), acc[1]);
+        acc[1] = _mm512_fmadd_ps(w10, LS_C1(t10), acc[1]); acc[1] = _mm512_fmadd_ps(w11, LS_C1(t11), acc[1]);
         acc[2] = _mm512_fmadd_ps(w00, LS_C2(t00), acc[2]); acc[2] = _mm512_fmadd_ps(w01, LS_C2(t01), acc[2]);
         acc[2] = _mm512_fmadd_ps(w10, LS_C2(t10), acc[2]); acc[2] = _mm512_fmadd_ps(w11, LS_C2(t11), acc[2]);
     } else {
-#define LS_C2M(t) _mm512_cvtepi32_ps(_mm512_and_si512(_mm512_srli_epi32(t, 16), m))
+        /* G and B by one byte shuffle each, as sample8 */
+        const __m512i g = _mm512_broadcast_i32x4(_mm_setr_epi8(1, -1, -1, -1, 5, -1, -1, -1, 9, -1, -1, -1, 13, -1, -1, -1));
+        const __m512i b = _mm512_broadcast_i32x4(_mm_setr_epi8(2, -1, -1, -1, 6, -1, -1, -1, 10, -1, -1, -1, 14, -1, -1, -1));
+#define LS_SH(t, sel) _mm512_cvtepi32_ps(_mm512_shuffle_epi8(t, sel))
 #define LS_C3(t) _mm512_cvtepi32_ps(_mm512_srli_epi32(t, 24))
-        acc[2] = _mm512_fmadd_ps(w00, LS_C2M(t00), acc[2]); acc[2] = _mm512_fmadd_ps(w01, LS_C2M(t01), acc[2]);
-        acc[2] = _mm512_fmadd_ps(w10, LS_C2M(t10), acc[2]); acc[2] = _mm512_fmadd_ps(w11, LS_C2M(t11), acc[2]);
+        acc[1] = _mm512_fmadd_ps(w00, LS_SH(t00, g), acc[1]); acc[1] = _mm512_fmadd_ps(w01, LS_SH(t01, g), acc[1]);
+        acc[1] = _mm512_fmadd_ps(w10, LS_SH(t10, g), acc[1]); acc[1] = _mm512_fmadd_ps(w11, LS_SH(t11, g), acc[1]);
+        acc[2] = _mm512_fmadd_ps(w00, LS_SH(t00, b), acc[2]); acc[2] = _mm512_fmadd_ps(w01, LS_SH(t01, b), acc[2]);
+        acc[2] = _mm512_fmadd_ps(w10, LS_SH(t10, b), acc[2]); acc[2] = _mm512_fmadd_ps(w11, LS_SH(t11, b), acc[2]);
         acc[3] = _mm512_fmadd_ps(w00, LS_C3(t00), acc[3]); acc[3] = _mm512_fmadd_ps(w01, LS_C3(t01), acc[3]);
         acc[3] = _mm512_fmadd_ps(w10, LS_C3(t10), acc[3]); acc[3] = _mm512_fmadd_ps(w11, LS_C3(t11), acc[3]);
-#undef LS_C2M
+#undef LS_SH
 #undef LS_C3
     }
 #undef LS_C0

@@ -213,15 +213,14 @@ def warp_blend_rgba(pa, pb, aa, ab, da, db, by0, bx0, bh, bw, step, ry0, ry1, rx
             acc_a = _tap(pa, ax, ay, xmax, ymax)
             acc_b = _tap(pb, bx, by, xmax, ymax)
             # alpha and the premultiplied colours in 1/4096^2; straight colour = c * 255 / alpha
+            # (the alpha taps repeat the colour taps' position arithmetic: LLVM shares it)
             alpha = _tap(aa, ax, ay, xmax, ymax) * ka + _tap(ab, bx, by, xmax, ymax) * kb
             out[y, x, 3] = (alpha + 8388608) >> 24
             if alpha > 0:
-                half = alpha >> 1
-                out[y, x, 0] = min(((acc_a & m) * ka + (acc_b & m) * kb) * 255 + half, 255 * alpha) // alpha
-                out[y, x, 1] = min((((acc_a >> 21) & m) * ka + ((acc_b >> 21) & m) * kb) * 255 + half,
-                                   255 * alpha) // alpha
-                out[y, x, 2] = min((((acc_a >> 42) & m) * ka + ((acc_b >> 42) & m) * kb) * 255 + half,
-                                   255 * alpha) // alpha
+                s = 255.0 / alpha  # one division a pixel (float64 holds the sums exactly)
+                out[y, x, 0] = min(int(((acc_a & m) * ka + (acc_b & m) * kb) * s + 0.5), 255)
+                out[y, x, 1] = min(int((((acc_a >> 21) & m) * ka + ((acc_b >> 21) & m) * kb) * s + 0.5), 255)
+                out[y, x, 2] = min(int((((acc_a >> 42) & m) * ka + ((acc_b >> 42) & m) * kb) * s + 0.5), 255)
             else:
                 out[y, x, 0] = 0
                 out[y, x, 1] = 0

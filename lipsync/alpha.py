@@ -26,8 +26,8 @@ from typing import Optional, Sequence, Tuple, Union
 import cv2
 import numpy as np
 
-__all__ = ["has_alpha", "is_opaque", "premultiply", "unpremultiply", "blend", "over", "flatten",
-           "warp_rgba", "resize_rgba", "parse_colour"]
+__all__ = ["has_alpha", "is_opaque", "premultiply", "unpremultiply", "blend", "blend_premultiplied", "over",
+           "flatten", "warp_rgba", "resize_rgba", "parse_colour"]
 
 
 def has_alpha(image: np.ndarray) -> bool:
@@ -109,6 +109,27 @@ def blend(a: np.ndarray, b: np.ndarray, t: float, out: Optional[np.ndarray] = No
     p *= np.float32(1.0 - t)
     p += premultiply(b) * np.float32(t)
     return unpremultiply(p, out)
+
+
+def blend_premultiplied(pa: np.ndarray, pb: np.ndarray, t: float, out: np.ndarray) -> np.ndarray:
+    """``(1 - t) pa + t pb`` of two premultiplied RGBA ``uint8`` images, as straight RGBA
+    into ``out``: two SIMD passes of OpenCV (the renderer's baselines use it per frame; a
+    pixel of alpha a is exact to about 255 / a levels of its straight colour, nothing once
+    composited).
+
+    Examples
+    --------
+    >>> pa = premultiply(np.array([[[255, 0, 0, 255]]], np.uint8), dtype=np.uint8)
+    >>> pb = np.zeros((1, 1, 4), np.uint8)
+    >>> blend_premultiplied(pa, pb, 0.5, np.empty((1, 1, 4), np.uint8))[0, 0].tolist()
+    [255, 0, 0, 128]
+    """
+    mixed = cv2.addWeighted(pa, 1.0 - t, pb, t, 0.0)
+    if out.flags.c_contiguous:
+        cv2.cvtColor(mixed, cv2.COLOR_mRGBA2RGBA, dst=out)
+    else:  # a view into a larger frame: OpenCV would write a new array
+        np.copyto(out, cv2.cvtColor(mixed, cv2.COLOR_mRGBA2RGBA))
+    return out
 
 
 def over(top: np.ndarray, bottom: np.ndarray, out: Optional[np.ndarray] = None) -> np.ndarray:

@@ -751,10 +751,13 @@ MIN_SPEECH_S = 5.0
 def fit_speaker(recordings, values: Mapping[str, float], pmap) -> Optional[DominanceParams]:
     """The dominance constants for one speaker, from videos of them talking (or None).
 
-    What ``lipsync init --video`` stores in the new bank's bank.yaml (``coarticulation:``).
-    Measured on GRID s1 (``make bench``, ``coarticulation_rendered``): with the bank made
-    from the 10 bank sentences, held-out sentences rendered with constants fitted this way
-    follow the real lips slightly better than with :data:`DEFAULT_PARAMS`.
+    To store in a bank's bank.yaml (``coarticulation:``, :func:`rounded`). Measured on GRID s1
+    (``make bench``, ``coarticulation_rendered``), with a bank made by ``lipsync init --video``
+    from the 10 bank sentences: held-out sentences rendered with constants fitted this way
+    (to the same 10 sentences) follow the real lips no better than with
+    :data:`DEFAULT_PARAMS` (r 0.719 against 0.721; an earlier bank of the same speaker:
+    0.676 against 0.671), so ``init --video`` keeps the defaults; a speaker unlike the one
+    they were fitted on may gain more.
 
     Parameters
     ----------

@@ -50,7 +50,7 @@ from typing import Dict, Optional, Tuple
 import cv2
 import numpy as np
 
-from .alpha import blend as blend_rgba, premultiply, unpremultiply
+from .alpha import blend_premultiplied, premultiply, unpremultiply
 from .bank import Bank
 from .errors import InputError
 from .flows import pair_flows
@@ -321,6 +321,7 @@ class Renderer:
         self._local = threading.local()
         self._packed_images: Dict[str, np.ndarray] = {}
         self._alpha_planes: Dict[str, np.ndarray] = {}
+        self._premul_images: Dict[str, np.ndarray] = {}
         self._rgbx_images: Dict[str, np.ndarray] = {}
         #: Threads one flow frame is split across. All cores by default (a single frame,
         #: e.g. live playback, comes back sooner); 1 when frames themselves are rendered in
@@ -358,13 +359,16 @@ class Renderer:
                 self._frame_pair = None
             return frame
         if self.method == "dissolve":
-            self._blend(imgs[from_viseme], imgs[to_viseme], alpha, frame)
+            if self.channels == 4:
+                blend_premultiplied(self._premul(from_viseme), self._premul(to_viseme), alpha, frame)
+            else:
+                cv2.addWeighted(imgs[from_viseme], 1.0 - alpha, imgs[to_viseme], alpha, 0.0, dst=frame)
             if out is None:
                 self._frame_pair = None
             return frame
         if self.method == "beier-neely":
             wa, wb = self._beier_neely_parts(from_viseme, to_viseme, alpha)
-            self._blend(wa, wb, alpha, frame)
+            self._blend(wa, wb, alpha, frame)  # (RGBA: the parts are premultiplied)
             if out is None:
                 self._frame_pair = None
             return frame
@@ -392,21 +396,32 @@ class Renderer:
         self._check(from_viseme, to_viseme, alpha)
         imgs = self.nb.images
         a, b = imgs[from_viseme], imgs[to_viseme]
+        # RGBA: wa, wb are made premultiplied where the method blends premultiplied, and
+        # returned straight
+        pm = self.channels == 4
         if self.method == "dissolve" or from_viseme == to_viseme:
-            wa, wb = a.copy(), b.copy()
+            wa, wb = (self._premul(from_viseme).copy(), self._premul(to_viseme).copy()) if pm else (a.copy(), b.copy())
         elif self.method == "beier-neely":
             wa, wb = (x.copy() for x in self._beier_neely_parts(from_viseme, to_viseme, alpha))
         else:
             pair = self._pair(from_viseme, to_viseme)
             wa, wb = a.copy(), b.copy()
             r = pair.roi
-            if not r.empty:
-                if self.method == "flow":
+            if self.method == "flow":
+                pm = False  # the kernel gives straight RGBA
+                if not r.empty:
                     self._flow_frame(pair, alpha, wa, wb)
-                else:
+            else:
+                if pm:
+                    wa, wb = self._premul(from_viseme).copy(), self._premul(to_viseme).copy()
+                if not r.empty:
                     buf_a, buf_b = self._splat_parts(pair, alpha)
                     wa[r.y0:r.y1, r.x0:r.x1] = buf_a
                     wb[r.y0:r.y1, r.x0:r.x1] = buf_b
+        if pm:
+            blend = blend_premultiplied(wa, wb, alpha, np.empty_like(wa))
+            wa, wb = (cv2.cvtColor(x, cv2.COLOR_mRGBA2RGBA) for x in (wa, wb))
+            return wa, wb, blend
         blend = self._blend(wa, wb, alpha, np.empty_like(wa))
         return wa, wb, blend
 
@@ -424,9 +439,14 @@ class Renderer:
         return out
 
     def _blend(self, a: np.ndarray, b: np.ndarray, alpha: float, out: np.ndarray) -> np.ndarray:
-        """``(1 - alpha) a + alpha b`` into ``out``: premultiplied when the frames have alpha."""
+        """``(1 - alpha) a + alpha b`` into ``out``. RGBA: ``a`` and ``b`` premultiplied
+        (splat and beier-neely make them so) except for the flow kernel's straight parts."""
         if self.channels == 4:
-            return blend_rgba(a, b, alpha, out)
+            if self.method == "flow":
+                a, b = premultiply(a, dtype=np.uint8), premultiply(b, dtype=np.uint8)
+            # the mix and the division in float: one rounding, as in the flow kernel (splat
+            # and beier-neely cost far more than this pass anyway)
+            return unpremultiply(cv2.addWeighted(a, 1.0 - alpha, b, alpha, 0.0, dtype=cv2.CV_32F), out)
         return cv2.addWeighted(a, 1.0 - alpha, b, alpha, 0.0, dst=out)
 
     # ------------------------------------------------------------------ checks
@@ -582,6 +602,13 @@ class Renderer:
             got = self._packed_images[v] = pack_pixels(self.nb.images[v])
         return got
 
+    def _premul(self, v: str) -> np.ndarray:
+        """Viseme ``v``'s image premultiplied, uint8 (RGBA banks)."""
+        got = self._premul_images.get(v)
+        if got is None:
+            got = self._premul_images[v] = premultiply(self.nb.images[v], dtype=np.uint8)
+        return got
+
     def _alpha_plane(self, v: str) -> np.ndarray:
         got = self._alpha_planes.get(v)
         if got is None:
@@ -596,11 +623,12 @@ class Renderer:
                              np.ascontiguousarray(p.bwd_field.full()[sl]),
                              identity_grid((r.y1 - r.y0, r.x1 - r.x0)))
         fwd, bwd, grid = p.splat_state
-        imgs = self.nb.images
+        # RGBA: splatted premultiplied, and returned so (render blends them premultiplied)
+        imgs = self.nb.images if self.channels == 3 else {v: self._premul(v) for v in (p.a, p.b)}
         buf_a = np.empty(grid.shape[:2] + (self.channels,), np.uint8)
         buf_b = np.empty_like(buf_a)
-        _splat(imgs[p.a][r.y0:r.y1, r.x0:r.x1], fwd, alpha, grid, buf_a)
-        _splat(imgs[p.b][r.y0:r.y1, r.x0:r.x1], bwd, 1.0 - alpha, grid, buf_b)
+        _splat(imgs[p.a][r.y0:r.y1, r.x0:r.x1], fwd, alpha, grid, buf_a, premultiplied=self.channels == 4)
+        _splat(imgs[p.b][r.y0:r.y1, r.x0:r.x1], bwd, 1.0 - alpha, grid, buf_b, premultiplied=self.channels == 4)
         return buf_a, buf_b
 
     def _beier_neely_parts(self, a: str, b: str, alpha: float) -> Tuple[np.ndarray, np.ndarray]:
@@ -608,11 +636,9 @@ class Renderer:
         lines = (1.0 - alpha) * nb.lines[a] + alpha * nb.lines[b]
         for src, out in ((a, self._full_a), (b, self._full_b)):
             m = beier_neely_map(self.shape, dst_lines=lines, src_lines=nb.lines[src], a=w.a, b=w.b, p=w.p)
-            if self.channels == 4:  # resampled premultiplied
-                unpremultiply(cv2.remap(premultiply(nb.images[src]), m, None, cv2.INTER_LINEAR,
-                                        borderMode=cv2.BORDER_REPLICATE), out)
-            else:
-                cv2.remap(nb.images[src], m, None, cv2.INTER_LINEAR, dst=out, borderMode=cv2.BORDER_REPLICATE)
+            # (RGBA: resampled premultiplied, and left so for the blend)
+            img = self._premul(src) if self.channels == 4 else nb.images[src]
+            cv2.remap(img, m, None, cv2.INTER_LINEAR, dst=out, borderMode=cv2.BORDER_REPLICATE)
         return self._full_a, self._full_b
 
 
@@ -638,18 +664,16 @@ def _canonical(method: str) -> str:
 
 
 def _splat(image: np.ndarray, flow: np.ndarray, t: float, grid: np.ndarray, out: np.ndarray, *,
-           _premultiplied: bool = False) -> None:
+           premultiplied: bool = False) -> None:
     """Paper 3.4 forward mapping: carry each pixel to ``X + t*flow(X)``, then fill holes.
 
     Each source pixel adds its colour, with bilinear weights, to the four output pixels
     around its target; ``np.bincount`` does the scattered sums in one pass per channel.
-    RGBA: the sums and the hole filling are of premultiplied colour; ``out`` gets straight RGBA.
+    RGBA: ``image`` premultiplied (``premultiplied=True``), the sums and the hole filling are
+    of premultiplied colour, and so is ``out``.
     """
-    if image.shape[2] == 4 and not _premultiplied:
-        p = np.empty(out.shape, np.uint8)
-        _splat(premultiply(image, dtype=np.uint8), flow, t, grid, p, _premultiplied=True)
-        unpremultiply(p, out)
-        return
+    if image.shape[2] == 4 and not premultiplied:
+        raise ValueError("an RGBA image is splatted premultiplied")
     h, w = out.shape[:2]
     tx = (grid[..., 0] + t * flow[..., 0]).ravel()
     ty = (grid[..., 1] + t * flow[..., 1]).ravel()

@@ -130,6 +130,10 @@ def test_no_dark_fringe_at_the_edge(disc_bank, method, kernel):
     # the colour (~100 levels).
     want = exp[..., :3] * 255 / np.maximum(exp[..., 3:4], 1e-6)
     bound = 255 / (2 * a[edge]) + 2.5
+    if method == "dissolve":
+        # the cross-fade mixes premultiplied bytes and rounds the mix to bytes again (two
+        # SIMD passes of OpenCV, for speed): twice the rounding
+        bound = 255 / a[edge] + 2.5
     err = np.abs(frame[..., :3][edge].astype(float) - want[edge]).max(axis=1)
     assert (err <= bound).all(), (err - bound).max()
     # brightness of the edge: as bright as the inside (a fringe is darker)
@@ -150,7 +154,7 @@ def test_straight_alpha_would_fringe(disc_bank):
     # of the two warped RGBA images, as the RGB path does) darkens the edge.
     t = 0.4
     r = Renderer(disc_bank, method="beier-neely")
-    wa, wb = r._beier_neely_parts("X", "A", t)
+    wa = cv2.cvtColor(r._beier_neely_parts("X", "A", t)[0], cv2.COLOR_mRGBA2RGBA)  # (premultiplied there)
     pa = np.dstack([shifted(disc_image(**DISC_X)[..., c], t * SHIFT) for c in range(4)])
     naive = np.clip(np.rint(pa), 0, 255).astype(np.uint8)  # bilinear on straight RGBA
     a = naive[..., 3].astype(float)

@@ -165,9 +165,8 @@ def test_bank_from_video_loads_and_is_complete(made, tmp_path):
         assert entry["video"] in ("bbwm5s.mpg", "lwae8n-dark.mp4") and entry["image"] == f"{v}.png"
         assert 0.0 <= entry["time"] <= 3.0
     assert cv2.imread(str(result.path / "preview.png")).shape[0] > h
-    # a real face moves as real speech does: the coarticulation model (issue 21); two 3 s clips
-    # hold too little speech to fit its constants to this speaker, so the defaults stay
-    assert bank.timing == "dominance" and bank.coarticulation is None and report["timing"]["fitted"] is False
+    # a real face moves as real speech does: the coarticulation model (issue 21), its defaults
+    assert bank.timing == "dominance" and bank.coarticulation is None and report["timing"] == "dominance"
     # neither clip says an R, AO or ER: E is borrowed, and the warning names it and its sounds
     assert result.missing == {"E": "F"} and report["missing"]["E"]["uses"] == "F"
     assert any("never shows E (" in m and "ER" in m and "samples/record-script.txt" in m for m in caught)

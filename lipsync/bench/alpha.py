@@ -128,7 +128,8 @@ def bench_alpha_encode(rows: List[dict], banks: Dict[str, Path], tmp: Path, quic
         times = []
         for _ in range(1 if quick else 3):
             t0, c0 = time.perf_counter(), _cpu()
-            with open_writer(out, fps=25, size=(w, h), format=fmt, quiet=True, frames=len(data)) as wr:
+            with open_writer(out, fps=25, size=(w, h), format=fmt, quiet=True, frames=len(data),
+                             channels=data[0].shape[2]) as wr:
                 for f in data:
                     wr.write(f)
             times.append((time.perf_counter() - t0, _cpu() - c0))

@@ -28,7 +28,8 @@ Figures (``python -m lipsync.bench --only NAME``):
   frames (not rendered again) and one-frame pops; per clip r (``coarticulation_clips``).
 * ``coarticulation_rendered``: with a bank made by ``lipsync init --video`` from BANK_CLIPS,
   held-out sentences rendered with each model, the face tracked on the rendered frames, lip
-  opening correlated with the real speaker's; with the constants refitted to that bank.
+  opening correlated with the real speaker's; also with the constants fitted to the speaker
+  (:func:`lipsync.coarticulation.fit_speaker` on the bank clips and the bank's pictures).
 """
 
 from __future__ import annotations
@@ -382,6 +383,16 @@ def _video_bank(ctx: Context):
     return Bank.load(out)
 
 
+def _fit_speaker(values, pmap):
+    """:func:`lipsync.coarticulation.fit_speaker` on the bank clips: their aligned visemes,
+    real lip opening and the bank pictures' openings (what ``init --video`` could store)."""
+    from ..coarticulation import fit_speaker
+
+    recordings = [([(s.start, s.end, s.label) for s in viseme_track(c, "align", pmap)],
+                   G.real_measures(c)["opening"], G.track(c).fps) for c in G.BANK_CLIPS]
+    return fit_speaker(recordings, values, pmap)
+
+
 @FIGURES.decorator("coarticulation_rendered")
 def rendered_figure(ctx: Context, rows: List[dict]) -> None:
     from .. import coarticulation as co
@@ -394,7 +405,7 @@ def rendered_figure(ctx: Context, rows: List[dict]) -> None:
     pmap = _pmap()
     bank = _video_bank(ctx)
     values = bank_values(bank)
-    fitted = bank.coarticulation    # what init --video fitted to the speaker (None: the defaults)
+    fitted = _fit_speaker(values, pmap)
     held = G.held_out()[:8] if ctx.quick else G.held_out()
     # predicted with the real bank's pictures (no rendering): as the ideal-bank figure
     pred = _scores(held, "align", "opening", values, pmap=pmap)
@@ -404,14 +415,14 @@ def rendered_figure(ctx: Context, rows: List[dict]) -> None:
     if fitted is not None:
         refit_pred = _scores(held, "align", "opening", values, params=fitted, pmap=pmap)["dominance"]
         rows.append({"figure": "coarticulation", "bank": "init --video (pictures)", "phones": "align",
-                     "measure": "opening", "timing": "dominance fitted by init --video", "r held-out": _mean(refit_pred),
+                     "measure": "opening", "timing": "dominance fitted to the speaker", "r held-out": _mean(refit_pred),
                      "rmse held-out": _mean(refit_pred, 2)})
     # rendered through the renderer, the face tracked on the rendered frames
     mesh = FaceMesh()
     cases = {"today": dict(timing="sqrt-fast-middle", methods=("flow morph", "hard cuts")),
              "dominance": dict(timing=co.DEFAULT_PARAMS, methods=("flow morph",))}
     if fitted is not None:
-        cases["the bank's own (dominance fitted by init --video)"] = dict(timing=None, methods=("flow morph",))
+        cases["dominance fitted to the speaker"] = dict(timing=fitted, methods=("flow morph",))
     r: Dict[str, list] = {}
     pooled: Dict[str, list] = {}
     for clip in held:
@@ -430,5 +441,5 @@ def rendered_figure(ctx: Context, rows: List[dict]) -> None:
                      "pooled r": round(G.correlation(np.concatenate(pooled[label]), real_all), 3),
                      "clips above cuts": f"{sum(a > b for a, b in zip(r[label], r['cuts']))}/{len(held)}"})
     if fitted is not None:
-        rows.append({"figure": "coarticulation_rendered", "bank": "constants fitted by init --video",
+        rows.append({"figure": "coarticulation_rendered", "bank": "constants fitted to the speaker",
                      "timing": _short(fitted), "look-ahead ms": round(1000 * co.lookahead(fitted))})

@@ -93,6 +93,14 @@ class Pictures:
     points: Dict[tuple, np.ndarray]   # (video, frame) -> mesh in the picture's pixels
 
 
+#: How a real face's mouth moves when a render does not say (bank.yaml ``timing``): the
+#: coarticulation model (issue 21), measured closer to real lips than the rule-based
+#: sequencer on GRID s1's held-out sentences, rendered with a bank from this function
+#: (``python -m lipsync.bench --only coarticulation_rendered``). Its default constants:
+#: fitting them to the speaker (lipsync.coarticulation.fit_speaker) measured no better there.
+TIMING = "dominance"
+
+
 def _viseme_order(pmap) -> List[str]:
     """The map's visemes in its naming system's order (the toon's A..H, X), else sorted, rest last."""
     from ..banks.names import SYSTEMS
@@ -293,9 +301,7 @@ def assemble(outdir: Path, footage: Footage, ranked: Dict[str, List[Candidate]],
     the bank (PNGs, bank.yaml, report, preview, flows) all at once."""
     from ..bank import Bank
     from ..banks.yamlio import write_bank_text
-    from ..coarticulation import fit_speaker, rounded
     from ..face.lines import SYMMETRIC_BELOW, face_asymmetry, face_features
-    from ..face.measure import lip_opening
     from . import colour, write
 
     t = time.perf_counter()
@@ -320,17 +326,6 @@ def assemble(outdir: Path, footage: Footage, ranked: Dict[str, List[Candidate]],
     asym = face_asymmetry(list(pts.values()))
     symmetric = asym < SYMMETRIC_BELOW
     features = face_features(pts, (h, w), axis=frame.axis)
-    seconds["choose"] = time.perf_counter() - t
-
-    # how this speaker's mouth moves (issue 21): the dominance model, its constants fitted to
-    # the lips in these videos with the chosen pictures' openings (lipsync.coarticulation)
-    t = time.perf_counter()
-    fitted = fit_speaker([([(x.start, x.end, x.label) for x in sp.visemes], lip_opening(tr.points), tr.fps)
-                          for sp, tr in zip(footage.speeches, footage.tracks)],
-                         {v: float(lip_opening(p)) for v, p in pts.items()}, pmap)
-    constants = rounded(fitted) if fitted is not None else None
-    seconds["timing"] = time.perf_counter() - t
-    t = time.perf_counter()
 
     files = write.image_names(order)
     report = {
@@ -351,15 +346,14 @@ def assemble(outdir: Path, footage: Footage, ranked: Dict[str, List[Candidate]],
         } for s, sp, tr, reg in zip(footage.sources, footage.speeches, footage.tracks, footage.regs)],
         "visemes": {},
         "missing": {v: {"uses": u, "record": _what_to_record([v], pmap)} for v, u in missing.items()},
-        "timing": {"model": "dominance", "fitted": constants is not None,
-                   "constants": constants if constants is not None else "defaults (too little speech to fit)"},
+        "timing": TIMING,
     }
     for v in order:
         c = source_of[v]
         report["visemes"][v] = dict(image=files[v], video=footage.sources[c.video].name, **c.report(),
                                     candidates=len(ranked.get(v, [])), borrowed_from=missing.get(v),
                                     colour_gain=list(gains[(c.video, c.frame)]))
-    seconds["choose"] += time.perf_counter() - t
+    seconds["choose"] = time.perf_counter() - t
 
     header = [f"# Written by lipsync init --video from {len(footage.sources)} video(s) ({names[:200]}): one "
               f"frame per viseme, lines placed from the face; the choice is in {write.REPORT_NAME}."]
@@ -371,7 +365,7 @@ def assemble(outdir: Path, footage: Footage, ranked: Dict[str, List[Candidate]],
             images[files[v]] = matched[(c.video, c.frame)]
             write.write_png(tmp / files[v], images[files[v]])
         text_yaml = write.bank_text(outdir.resolve().name, pmap.silence, files, features, symmetric=symmetric,
-                                    header=header, timing="dominance", coarticulation=constants)
+                                    header=header, timing=TIMING)
         Bank.from_text(text_yaml, tmp, images=images)  # never write a bank that would not load
         write_bank_text(tmp / "bank.yaml", text_yaml)
         bank = Bank.load(tmp)
