@@ -47,4 +47,5 @@ docs-images: $(STAMP)
 	$(BIN)/lipsync preview visemes/toon -o docs/preview.png
 	$(BIN)/python -m lipsync.editor.browser visemes/toon docs/editor.png
 	$(BIN)/python tools/face_overlay.py docs/face-lines.jpg
+	$(BIN)/python tools/atlas_picture.py docs/atlas.jpg
 	$(BIN)/python tools/real_strip.py docs/strip-real.png

@@ -26,6 +26,7 @@ import numpy as np
 
 from .bank import Bank
 from .coarticulation import resolve_timing, viseme_classes
+from .errors import InputError
 from .phonemes import DEFAULT_MAP, PhonemeMap, bank_viseme_timeline, load_map
 from .readers import read_timeline
 from .render import Renderer
@@ -170,11 +171,29 @@ class Animator:
         return _still_key(self.specs[index]) == _still_key(self.specs[index - 1])
 
     def frame_at(self, t: float) -> np.ndarray:
-        """The frame shown at time ``t`` seconds (the frame whose interval holds ``t``)."""
-        if not math.isfinite(t):
-            raise ValueError(f"time must be finite, got {t}")
-        index = min(max(int(math.floor(t * self.fps + 1e-9)), 0), len(self.specs) - 1)
-        return self.frame(index)
+        """The frame shown at time ``t`` seconds (the frame whose interval holds ``t``).
+
+        Total for every number: a time before 0 gives the first frame, one past the end
+        (however large, infinity included) the last, and a timeline with no frames the rest
+        viseme. A NaN time is refused (InputError, a ValueError): it is a bug in the
+        caller's clock, and any frame shown for it would hide that.
+
+        Examples
+        --------
+        >>> from lipsync._data import default_bank_dir
+        >>> from lipsync.timeline import Segment, Timeline
+        >>> a = Animator(default_bank_dir(), Timeline((Segment(0.0, 0.4, "AA"),), kind="phoneme"), fps=25)
+        >>> bool((a.frame_at(1e308) == a.frame(len(a) - 1)).all()), a.frame_at(-5.0).shape
+        (True, (512, 512, 3))
+        """
+        t = float(t)
+        if math.isnan(t):
+            raise InputError("time must be a number, got nan")
+        if not self.specs:
+            return self.renderer.render(self.bank.rest, self.bank.rest, 0.0)
+        pos = t * self.fps  # inf for huge t: compared as a float, never made an int
+        index = 0 if pos <= 0 else len(self.specs) - 1 if pos >= len(self.specs) else int(math.floor(pos + 1e-9))
+        return self.frame(min(index, len(self.specs) - 1))
 
     def frames(self, *, copy: bool = True) -> Iterator[np.ndarray]:
         """Every frame in order.

@@ -38,6 +38,7 @@ import numpy as np
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
+from . import _yaml
 from .coarticulation import DominanceOverrides, DominanceParams
 from .errors import BankError, InputError
 from .timing import check_timing
@@ -75,7 +76,7 @@ _ARC_SAMPLES = 256
 class WarpParams(BaseModel):
     """Beier–Neely weight parameters: ``weight = (length**p / (a + dist))**b``."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)  # NaN: "finite number", not a range
     a: float = Field(1.0, gt=0, le=1e4)
     b: float = Field(2.0, gt=0, le=8)
     p: float = Field(0.5, ge=0, le=2)
@@ -466,8 +467,9 @@ def _parse_yaml_text(text: str, yaml_path: Path):
         # Found by fuzzing: libyaml's composer recurses on the C stack and segfaults on ~50,000
         # nested "[" or "- " (100 kB); such text goes to the Python loader, whose RecursionError
         # is caught below.
-        fast = getattr(yaml, "CSafeLoader", None)
-        loader = (fast if fast is not None and _yaml_depth(text) <= _C_LOADER_MAX_DEPTH else yaml.SafeLoader)(text)
+        # A key given twice (a viseme, a line) is refused, naming both lines (lipsync._yaml).
+        fast = _yaml.CSafeLoader
+        loader = (fast if fast is not None and _yaml_depth(text) <= _C_LOADER_MAX_DEPTH else _yaml.SafeLoader)(text)
         try:
             root = loader.get_single_node()
             data = loader.construct_document(root) if root is not None else None

@@ -228,6 +228,7 @@ def render_clip(timeline, output: PathLike, *, bank=None, audio: Optional[PathLi
     from .bank import Bank
     from .composite import Compositor
     from .encode import ENCODERS, format_for, open_writer
+    from .encode.mp4 import check_preset
     from .errors import InputError
     from .preprocess import all_pairs, preprocess
     from .store import FlowStore
@@ -235,6 +236,7 @@ def render_clip(timeline, output: PathLike, *, bank=None, audio: Optional[PathLi
     t0 = time.perf_counter()
     if not 0 <= crf <= 51:
         raise InputError(f"--crf must be 0..51, got {crf}")
+    check_preset(preset)  # before any work, whatever the format (ffmpeg said so only after it)
     out_format = format or format_for(output)  # an unknown extension fails before any work
     alpha_out = bool(ENCODERS.get(out_format).alpha)
     if isinstance(background, str):
@@ -260,6 +262,11 @@ def render_clip(timeline, output: PathLike, *, bank=None, audio: Optional[PathLi
             audio = timeline  # speech in: its own sound is the soundtrack
     anim = Animator(bank, timeline, fps=fps, map=map, method=method, timing=timing, store=store,
                     timeline_options=timeline_options)
+    n = len(anim)
+    if n == 0:  # a video needs a frame; a timeline of no length has none to show (README: Rendering)
+        where = getattr(timeline, "path", None) if hasattr(timeline, "segments") else os.fspath(timeline)
+        raise InputError("the timeline lasts 0 s: there is no frame to render (a video needs at least one)",
+                         path=where)
     if method in ("flow", "splat"):
         # Only when an entry is missing: checking all of them (a CRC pass over every pair)
         # would cost more than rendering a short clip. A damaged entry is still caught --
@@ -269,7 +276,6 @@ def render_clip(timeline, output: PathLike, *, bank=None, audio: Optional[PathLi
             preprocess(bank, store=store, jobs=jobs, quiet=quiet, normalised=nb)
     h, w = compositor.shape
     t1 = time.perf_counter()
-    n = len(anim)
     # beier-neely keeps whole-frame scratch in the renderer: one thread; the rest are thread-safe
     threads = 1 if anim.renderer.method == "beier-neely" else None
     anim.renderer.frame_threads = 1  # whole frames run in parallel instead

@@ -60,3 +60,37 @@ class UnknownNameError(InputError, KeyError):
 
     def __str__(self) -> str:  # KeyError would otherwise quote the message
         return ValueError.__str__(self)
+
+
+def check_number(value, name: str, lo: float, hi: float, *, integer: bool = False, lo_open: bool = False) -> float:
+    """``value`` as a float (or int) if it is a finite number within ``lo..hi``, else InputError naming ``name``.
+
+    For options: NaN, infinities, text and out-of-range values all get the same message,
+    which names the option and the range (``lo_open``: ``lo`` itself excluded).
+
+    Examples
+    --------
+    >>> check_number("2.5", "--idle-timeout", 0, 86400, lo_open=True)
+    2.5
+    >>> check_number(float("nan"), "--idle-timeout", 0, 86400, lo_open=True)
+    Traceback (most recent call last):
+    ...
+    lipsync.errors.InputError: --idle-timeout must be a number above 0 and at most 86400, got nan
+    """
+    import math
+
+    try:
+        number = float(value)
+    except (TypeError, ValueError, OverflowError):
+        number = math.nan
+    ok = math.isfinite(number) and (number > lo if lo_open else number >= lo) and number <= hi
+    if ok and integer:
+        ok = number == int(number)
+    if not ok:
+        low = f"above {lo:g}" if lo_open else f"at least {lo:g}"
+        kind = "a whole number" if integer else "a number"
+        raise InputError(f"{name} must be {kind} {low} and at most {hi:g}, got {value!r}"
+                         if not isinstance(value, float) else
+                         f"{name} must be {kind} {low} and at most {hi:g}, got {value:g}")
+    return int(number) if integer else number
+

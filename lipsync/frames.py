@@ -20,7 +20,7 @@ from dataclasses import dataclass
 from typing import List, Optional, Tuple
 
 from .errors import InputError
-from .timeline import VISEME, Segment, Timeline
+from .timeline import MAX_TIMELINE_S, VISEME, Segment, Timeline
 
 #: Most frames one timeline may make: 11 hours at 25 fps, longer than any speech track, and
 #: bounded so that a wrong number in a file (frame 10^9) is an error, not gigabytes of frames.
@@ -74,6 +74,8 @@ def frame_count(duration: float, fps: float) -> int:
     """
     # Times like 1.358685 s * 25 fps carry float noise; a product within 1e-9 of an integer
     # is that integer, so a 2.0 s timeline never gets a 49th frame at 24 fps.
+    if not duration <= MAX_TIMELINE_S:  # also NaN; an infinite product cannot become an int
+        raise InputError(f"duration {duration:g} s is not within the limit of {MAX_TIMELINE_S:g} s (24 hours)")
     return max(0, int(math.ceil(duration * fps - 1e-9)))
 
 

@@ -254,8 +254,10 @@ def _load_yaml_model(model, path: Path, error):
         raise error(f"not UTF-8 text ({exc.reason})", path=path) from None
     except OSError as exc:
         raise error(f"cannot read: {exc.strerror or exc}", path=path) from None
+    from ._yaml import safe_load
+
     try:
-        data = yaml.safe_load(text)
+        data = safe_load(text)  # yaml.safe_load, but a key given twice is an error naming both lines
     except yaml.MarkedYAMLError as exc:
         # min(): the end-of-file mark can lie one line past the last (found by fuzzing).
         line = min(exc.problem_mark.line + 1, text.count("\n") + 1) if exc.problem_mark else None

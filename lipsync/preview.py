@@ -16,11 +16,12 @@ from __future__ import annotations
 
 import math
 import os
-import tempfile
 from collections.abc import Mapping, Sequence
 
 import cv2
 import numpy as np
+
+from ._files import atomic_write_bytes
 
 __all__ = ["draw_lines", "feature_lines", "preview_sheet", "strip", "save_png"]
 
@@ -396,19 +397,4 @@ def save_png(path, rgb) -> None:
     ok, data = cv2.imencode(".png", cv2.cvtColor(img, cv2.COLOR_RGBA2BGRA if img.shape[2] == 4 else cv2.COLOR_RGB2BGR))
     if not ok:
         raise ValueError(f"could not encode a {img.shape} image as PNG")
-    path = os.fspath(path)
-    folder = os.path.dirname(os.path.abspath(path))
-    fd, tmp = tempfile.mkstemp(dir=folder, prefix=os.path.basename(path) + ".", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data.tobytes())
-        # mkstemp makes the file private (0600); an image is meant to be shared.  (Reading the
-        # umask would mean setting it, which is not thread-safe.)
-        os.chmod(tmp, 0o644)
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except FileNotFoundError:
-            pass
-        raise
+    atomic_write_bytes(path, lambda fh: fh.write(data.tobytes()))

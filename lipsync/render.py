@@ -43,6 +43,7 @@ from __future__ import annotations
 
 import os
 import threading
+import warnings
 from collections import OrderedDict
 from dataclasses import dataclass
 from typing import Dict, Optional, Tuple
@@ -56,7 +57,7 @@ from .errors import InputError
 from .flows import pair_flows
 from .normalise import NormalisedBank, normalise
 from .registry import Registry
-from .store import Crop, FlowStore, InverseTables, StoredField, pack_pair, union_box, unpack_pair
+from .store import Crop, FlowStore, InverseTables, StoredField, StoreWarning, pack_pair, union_box, unpack_pair
 from .warp import beier_neely_map, identity_grid
 
 #: Splat holes are filled by Telea inpainting with this radius (px): holes from
@@ -461,14 +462,23 @@ class Renderer:
     # ------------------------------------------------------------------ pair state
     def _flows(self, a: str, b: str) -> Tuple[StoredField, StoredField]:
         got = self.store.get_pair(self.bank, a, b)
-        if got is not None:
-            return got
         nb = self.nb
         i, j = self.bank.names.index(a), self.bank.names.index(b)
         first, second = (a, b) if i <= j else (b, a)
+        key = self.store.pair_key(self.bank, first, second, nb.axis)
+        if got is not None and self.method == "splat":
+            # splat reads the float fields themselves: non-finite values there (which a CRC
+            # cannot tell from good ones) make the entry a miss, as a bad CRC does
+            try:
+                got[0].data, got[1].data
+            except ValueError as exc:
+                warnings.warn(f"{self.store.pair_path(key)}: unusable flow store entry ({exc}); recomputing it",
+                              StoreWarning, stacklevel=3)
+                got = None
+        if got is not None:
+            return got
         fwd, bwd = pair_flows(self.shape, nb.lines[first], nb.lines[second], self.bank.warp,
                               line_names=self.bank.line_names, axis=nb.axis)
-        key = self.store.pair_key(self.bank, first, second, nb.axis)
         try:
             self.store.put_pair(key, fwd, bwd, axis=nb.axis, names=(first, second))
             got = self.store.load_pair(key, self.shape)

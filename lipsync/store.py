@@ -50,6 +50,7 @@ from typing import Callable, Dict, Iterator, List, Optional, Tuple
 
 import numpy as np
 
+from ._files import atomic_write_bytes, remove_dead_partials_in
 from .bank import Bank
 
 #: Bump when the flow computation or the entry layout changes: old entries become misses.
@@ -188,25 +189,13 @@ def _clean_stale_temps(folder: Path) -> None:
             pass
 
 
-def atomic_write_bytes(path: Path, data_writer) -> None:
-    """Write a file via a temp file in its folder, fsync, then rename into place.
+def _clear_the_way(path: Path) -> None:
+    """A folder where an entry belongs is damage in our own store: removed, so the entry can
+    be written (it was a miss for reading already)."""
+    if path.is_dir() and not path.is_symlink():
+        import shutil
 
-    ``data_writer(fh)`` writes the content to the open binary file.
-    """
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.parent / f"{_TMP_PREFIX}{os.getpid()}-{os.urandom(4).hex()}"
-    try:
-        with open(tmp, "wb") as fh:
-            data_writer(fh)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            tmp.unlink()
-        except OSError:
-            pass
-        raise
+        shutil.rmtree(path, ignore_errors=True)
 
 
 class FlowStore:
@@ -292,6 +281,7 @@ class FlowStore:
     # ----------------------------------------------------------------------- entries
     def _write_entry(self, path: Path, meta: dict, arrays: Dict[str, np.ndarray]) -> None:
         data = _entry_bytes(dict(meta, sha256=_digest(arrays), version=FORMAT_VERSION), arrays)
+        _clear_the_way(path)
         atomic_write_bytes(path, lambda fh: fh.write(data))
 
     def _read_entry(self, path: Path, key: str) -> Optional[Tuple[dict, Dict[str, np.ndarray]]]:
@@ -326,6 +316,7 @@ class FlowStore:
         meta.update(key=key, kind="pair", names=list(names), version=FORMAT_VERSION)
         data = _flat_entry_bytes(meta, arrays)
         path = self.pair_path(key)
+        _clear_the_way(path)
         atomic_write_bytes(path, lambda fh: fh.write(data))
         return len(data)
 
@@ -383,7 +374,8 @@ class FlowStore:
     # ----------------------------------------------------------------------- housekeeping
     def clean_temps(self) -> None:
         for sub in ("flows", "images"):
-            _clean_stale_temps(self.root / sub)
+            _clean_stale_temps(self.root / sub)  # the ".tmp-PID-..." of earlier versions
+            remove_dead_partials_in(self.root / sub)
 
     def entries(self) -> Iterator[Path]:
         """Every entry file: pair flows (``.flow``; ``.npz`` from format 3 and older) and images."""
@@ -420,6 +412,10 @@ def _flat_entry_bytes(meta: dict, arrays: Dict[str, np.ndarray]) -> bytes:
     return _MAGIC + struct.pack("<I", zlib.crc32(body)) + bytes(body)
 
 
+def _non_finite(name: str):
+    raise ValueError(f"{name} in the entry's header")
+
+
 def _read_flat_entry(path: Path) -> Tuple[dict, Dict[str, np.ndarray]]:
     """Map ``path`` read-only, check magic and CRC; raise ValueError on any damage."""
     with open(path, "rb") as fh:
@@ -441,7 +437,7 @@ def _read_flat_entry(path: Path) -> Tuple[dict, Dict[str, np.ndarray]]:
     if zlib.crc32(body) != crc:
         raise ValueError("checksum mismatch")
     (hlen,) = struct.unpack_from("<I", body, 0)
-    meta = json.loads(bytes(body[4:4 + hlen]).decode())
+    meta = json.loads(bytes(body[4:4 + hlen]).decode(), parse_constant=_non_finite)  # our writer never writes NaN
     start = -(-(len(_MAGIC) + 8 + hlen) // _ALIGN) * _ALIGN
     arrays = {}
     for name, m in meta.pop("members").items():

@@ -39,6 +39,13 @@ PHONEME = "phoneme"
 VISEME = "viseme"
 KINDS = (PHONEME, VISEME)
 
+#: Latest time a timeline may reach: 24 hours. Longer than any speech track (an audiobook
+#: chapter, a day-long recording), and finite so that a wrong number in a file (1e308,
+#: milliseconds or samples read as seconds) is an error naming the file and line rather
+#: than an overflow wherever time becomes a frame number (24 h at 120 fps is 10^7 frames,
+#: which the sequencer's MAX_FRAMES then refuses with its own message).
+MAX_TIMELINE_S = 86400.0
+
 
 @dataclass(frozen=True)
 class Segment:
@@ -103,6 +110,12 @@ class Timeline(Sequence[Segment]):
                     f"segment {i} ({seg.start:g}-{seg.end:g} {seg.label!r}) is out of order "
                     f"or overlaps the one before", path=self.path)
             prev_end = seg.end
+        if prev_end > MAX_TIMELINE_S:  # also catches an infinite end
+            raise TimelineError(f"the timeline reaches {prev_end:g} s, past the limit of {MAX_TIMELINE_S:g} s "
+                                f"(24 hours; a time is likely wrong)", path=self.path)
+        if self.stated_end is not None and not 0 <= self.stated_end <= MAX_TIMELINE_S:
+            raise TimelineError(f"the stated end {self.stated_end:g} s is not within 0..{MAX_TIMELINE_S:g} s",
+                                path=self.path)
 
     def __len__(self) -> int:
         return len(self.segments)

@@ -122,3 +122,12 @@ def test_cli_check_exit_codes(bank_dir, capsys):
     assert main(["check", str(bank_dir)]) == 2
     err = capsys.readouterr().err
     assert "bank.yaml:" in err and "rest viseme 'Z'" in err
+
+
+@pytest.mark.parametrize("value", [".nan", ".inf", "-.inf"])
+def test_non_finite_warp_parameters_are_named_as_such(bank_dir, value):
+    # issue 19, item 8: `a: .nan` was reported as "less than or equal to 10000"
+    text = (bank_dir / "bank.yaml").read_text()
+    (bank_dir / "bank.yaml").write_text(text.replace("rest: X\n", f"rest: X\nwarp: {{a: {value}}}\n", 1))
+    with pytest.raises(BankError, match=r"bank\.yaml:\d+: warp\.a: Input should be a finite number"):
+        Bank.load(bank_dir)

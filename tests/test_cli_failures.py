@@ -106,12 +106,29 @@ def test_ffmpeg_failing(bank, tmp_path, when):
 
 # --------------------------------------------------------------------------- output path
 
-def test_output_folder_missing(bank, tmp_path):
+def test_output_folder_missing_is_made_as_every_command_makes_it(bank, tmp_path):
+    # render, cues, align, preview and morph all make OUT's missing folder (issue 19, item 8;
+    # render alone used to refuse), and all name OUT when it cannot be written
     out = tmp_path / "no" / "such" / "folder" / "talk.mp4"
     result = run_cli(*render_args(bank, out))
-    assert result.returncode == 1
-    assert "output folder does not exist" in result.stderr and str(out) in result.stderr
-    assert not (tmp_path / "no").exists()
+    assert result.returncode == 0, result.stderr
+    assert out.stat().st_size > 0 and sorted(os.listdir(out.parent)) == ["talk.mp4"]
+    timeline = tmp_path / "t.phn"
+    timeline.write_text("0 1600 h#\n1600 4800 aa\n4800 8000 h#\n")
+    made = {"cues": tmp_path / "c" / "d" / "cues.tsv", "preview": tmp_path / "p" / "q" / "sheet.png",
+            "morph": tmp_path / "m" / "n" / "half.png"}
+    assert run_cli("cues", str(timeline), "-o", str(made["cues"])).returncode == 0
+    assert run_cli("preview", str(bank), "-o", str(made["preview"])).returncode == 0
+    assert run_cli("morph", str(bank), "X", "A", "--alpha", "0.5", "-o", str(made["morph"])).returncode == 0
+    for path in made.values():
+        assert path.stat().st_size > 0 and sorted(os.listdir(path.parent)) == [path.name]
+    for cmd in (["cues", str(timeline)], ["render", str(timeline), "--bank", str(bank), "--quiet"],
+                ["preview", str(bank)], ["morph", str(bank), "X", "A", "--alpha", "0.5"]):
+        out = "/proc/no-such/x.png" if cmd[0] in ("preview", "morph") else \
+            ("/proc/no-such/x.tsv" if cmd[0] == "cues" else "/proc/no-such/x.mp4")
+        result = run_cli(*cmd, "-o", out)
+        assert result.returncode == 1 and f"cannot write {out}" in result.stderr, (cmd, result.stderr)
+        assert ".partial-" not in result.stderr and ".tmp" not in result.stderr
 
 
 def test_output_folder_is_a_file(bank, tmp_path):
@@ -376,12 +393,15 @@ def test_unknown_method_or_format(bank, tmp_path, capsys, option, value):
 CHILD_MEMORY_LIMIT = 3 << 30
 
 
-@pytest.mark.parametrize("name, text", [
-    ("huge.dat", "MohoSwitch1\n1 X\n1000000000 A\n"),                 # frame 10^9 at 24 fps
-    ("huge.phn", "0 1600 h#\n1600 100000000000000 aa\n"),              # 10^14 samples at 16 kHz
-    ("huge.tsv", "0.00\tX\n0.50\tB\n1e12\tX\n"),                       # a cue at 10^12 s
+@pytest.mark.parametrize("name, text, expect", [
+    # past 24 hours (MAX_TIMELINE_S): the reader refuses the line holding the number
+    ("huge.dat", "MohoSwitch1\n1 X\n1000000000 A\n", ":3: "),          # frame 10^9 at 24 fps
+    ("huge.phn", "0 1600 h#\n1600 100000000000000 aa\n", ":2: "),       # 10^14 samples at 16 kHz
+    ("huge.tsv", "0.00\tX\n0.50\tB\n1e12\tX\n", ":3: "),                # a cue at 10^12 s
+    # under 24 hours but over the sequencer's MAX_FRAMES at 25 fps (2 million frames)
+    ("long.tsv", "0.00\tX\n0.50\tB\n80000\tX\n", "frames"),
 ])
-def test_absurdly_long_timelines_are_refused_without_allocating(bank, tmp_path, name, text):
+def test_absurdly_long_timelines_are_refused_without_allocating(bank, tmp_path, name, text, expect):
     import resource
 
     timeline = tmp_path / name
@@ -394,7 +414,7 @@ def test_absurdly_long_timelines_are_refused_without_allocating(bank, tmp_path, 
     result = subprocess.run([sys.executable, "-m", "lipsync", *render_args(bank, out, timeline)],
                             capture_output=True, text=True, timeout=CMD_TIMEOUT_S, preexec_fn=cap_memory)
     assert result.returncode == 2, result.stderr[-800:]
-    assert str(timeline) in result.stderr and "frames" in result.stderr and "limit" in result.stderr
+    assert str(timeline) in result.stderr and expect in result.stderr and "limit" in result.stderr
     assert sorted(os.listdir(tmp_path)) == [name]
 
 
@@ -418,3 +438,35 @@ def test_render_imports_only_what_it_runs_on(tmp_path):
     names = set(parser._subparsers._group_actions[0].choices)
     assert {"render", "serve", "batch", "cues", "align"} <= names
     assert set(cli.build_parser(["rendr"])._subparsers._group_actions[0].choices) == names
+
+
+# --------------------------------------------------------------------------- issue 19, item 5
+
+def test_unknown_preset_is_refused_before_any_work(tmp_path):
+    bank = tmp_path / "toon"
+    shutil.copytree(ROOT / "visemes" / "toon", bank, ignore=shutil.ignore_patterns(".lipsync"))
+    out = tmp_path / "talk.mp4"
+    result = run_cli("render", str(HELLO), "-o", str(out), "--bank", str(bank), "--preset", "bogus", "--quiet")
+    assert result.returncode == 2, result.stderr
+    assert "--preset 'bogus'" in result.stderr and "talking-head" in result.stderr and "veryslow" in result.stderr
+    assert "ffmpeg" not in result.stderr.lower() and "Traceback" not in result.stderr
+    assert not (bank / ".lipsync").exists()  # nothing was computed
+    assert sorted(os.listdir(tmp_path)) == ["toon"]
+
+
+def test_a_timeline_of_no_length_is_bad_input_naming_it(tmp_path):
+    import wave
+
+    phn = tmp_path / "z.phn"
+    phn.write_text("0 0 h#\n")
+    wav = tmp_path / "empty.wav"
+    with wave.open(str(wav), "wb") as w:  # a WAV that is only its header
+        w.setnchannels(1)
+        w.setsampwidth(2)
+        w.setframerate(16000)
+    for src in (phn, wav):
+        out = tmp_path / f"{src.stem}.mp4"
+        result = run_cli("render", str(src), "-o", str(out), "--quiet")
+        assert result.returncode == 2, result.stderr
+        assert f"{src}: the timeline lasts 0 s" in result.stderr and not out.exists()
+    assert sorted(os.listdir(tmp_path)) == ["empty.wav", "z.phn"]

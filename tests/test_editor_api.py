@@ -353,3 +353,20 @@ def test_browser_tests_say_why_they_skip():
 
     assert "chromium-driver" in missing(chromium="/bin/sh", chromedriver="/nonexistent/chromedriver")
     assert "Debian package chromium;" in missing(chromium="/nonexistent/chromium")
+
+
+@pytest.mark.parametrize("doc", [
+    {"name": "t", "rest": "X", "visemes": {"X": 5}},                      # the case (was a 500)
+    {"name": "t", "rest": "X", "visemes": {"X": [1, 2]}},
+    {"name": "t", "rest": "X", "visemes": {"X": None, "A": "a.png"}},
+    {"name": "t", "rest": "X", "visemes": {"X": {"image": "X.png", "lines": 3}}},
+    {"name": "t", "rest": "X", "visemes": {"X": {"image": "X.png", "lines": {"a": float("nan")}}}},
+    {"name": ["t"], "rest": {"X": 1}, "visemes": []},
+])
+def test_malformed_documents_get_422_with_a_message(client, bank_dir, doc):
+    before = folder_state(bank_dir)
+    for route in ("/api/draft", "/api/save"):
+        r = client.post(route, content=json.dumps({"doc": doc}))
+        assert r.status_code == 422, (route, r.status_code, r.text[:300])
+        assert r.json()["ok"] is False and r.json()["error"]["message"]
+    assert folder_state(bank_dir) == before

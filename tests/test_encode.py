@@ -334,16 +334,27 @@ def test_ffmpeg_killed_mid_stream(tmp_path):
 def test_unwritable_output_folder_fails_before_any_work(tmp_path, monkeypatch):
     started = []
     monkeypatch.setattr(encode.ffmpeg, "popen", lambda *a, **k: started.append(a))
-    with pytest.raises(FileNotFoundError) as err:
-        open_writer(tmp_path / "no" / "such" / "clip.mp4", fps=FPS, size=(W, H))
-    assert "does not exist" in str(err.value) and str(tmp_path / "no" / "such") in str(err.value)
+    # a missing folder is made, as every command's -o does (issue 19, item 8) ...
+    with open_writer(tmp_path / "no" / "such" / "clip.mp4", fps=FPS, size=(W, H), quiet=True) as w:
+        assert (tmp_path / "no" / "such").is_dir()
+        w._abort()
+    started.clear()
+    # ... one that cannot be made is an error naming OUT, before ffmpeg starts
+    (tmp_path / "ro").mkdir()
+    os.chmod(tmp_path / "ro", 0o500)
+    if os.access(tmp_path / "ro", os.W_OK):  # root: permissions are not enforced
+        os.chmod(tmp_path / "ro", 0o700)
+    else:
+        with pytest.raises(PermissionError) as err:
+            open_writer(tmp_path / "ro" / "sub" / "clip.mp4", fps=FPS, size=(W, H))
+        assert str(tmp_path / "ro" / "sub" / "clip.mp4") in str(err.value)
     (tmp_path / "afile").write_text("x")
     with pytest.raises(NotADirectoryError):
         open_writer(tmp_path / "afile" / "clip.mp4", fps=FPS, size=(W, H))
     with pytest.raises(NotADirectoryError):
         open_writer(str(tmp_path / "afile" / "seq") + os.sep, fps=FPS, size=(W, H))
     assert started == []
-    assert leftovers(tmp_path, "afile") == []
+    assert leftovers(tmp_path, "afile", "no", "ro") == [] and os.listdir(tmp_path / "no" / "such") == []
 
 
 def test_read_only_folder(tmp_path):

@@ -174,6 +174,7 @@ SEED_FILES: Dict[str, List[Path]] = {
     "rhubarb-json": _files("tests/data/timelines/rhubarb_*.json"),
     "rhubarb-xml": _files("tests/data/timelines/rhubarb_*.xml"),
     "moho": _files("tests/data/timelines/*.dat"),
+    "pgo": _files("tests/data/conformance/papagayo/*.pgo", "tests/data/timelines/papagayo_*.pgo"),
     "timit": _files("samples/*.phn", "tests/data/timelines/timit_*.PHN", "tests/data/timelines/timit_*.phn"),
     # (samples/record-script.txt is text to read aloud, not a label track)
     "audacity": [p for p in _files("samples/*.txt", "tests/data/timelines/audacity_*.txt")
@@ -194,12 +195,12 @@ ALL_SEEDS: List[bytes] = [b for bs in SEEDS.values() for b in bs] + [p.read_byte
 #: Extensions and aliases each format is documented to answer to (lipsync/readers/*).
 EXTENSIONS = {"textgrid": [".TextGrid", ".textgrid"], "gentle": [".json"], "rhubarb-tsv": [".tsv"],
               "rhubarb-json": [".json"], "rhubarb-xml": [".xml"], "moho": [".dat"],
-              "timit": [".phn", ".PHN"], "audacity": [".txt", ".labels"],
+              "pgo": [".pgo"], "timit": [".phn", ".PHN"], "audacity": [".txt", ".labels"],
               "polly": [".marks", ".jsonl"], "azure": [".json"], "whisper": [".json"], "elevenlabs": [".json"],
               "audio": [".wav", ".flac", ".mp3", ".m4a", ".ogg"], "grid": [".align"]}
 ALIASES = {"textgrid": ["praat", "mfa", "TextGrid"], "gentle": ["GENTLE"], "rhubarb-tsv": ["tsv"],
            "rhubarb-json": ["Rhubarb-JSON"], "rhubarb-xml": ["xml"], "moho": ["dat", "papagayo"],
-           "timit": ["phn"], "audacity": ["labels"],
+           "pgo": ["papagayo-ng", "papagayo-project"], "timit": ["phn"], "audacity": ["labels"],
            "polly": ["speech-marks"], "azure": ["azure-visemes"], "whisper": ["words", "whisper.cpp"],
            "elevenlabs": ["character-alignment"], "audio": ["AUDIO"], "grid": ["grid-align"]}
 ALL_EXTENSIONS = sorted({e for es in EXTENSIONS.values() for e in es}) + [".lab", ".bin", ".yaml", ""]
@@ -355,6 +356,32 @@ def gen_moho(draw) -> str:
     return "MohoSwitch1\n" + body
 
 
+PGO_LABELS = ["AI", "O", "E", "etc", "MBP", "rest", "NLTDR", "EHSZ", "A", "H", "AA", "K", "smile"]
+
+
+def gen_pgo(draw) -> str:
+    """A Papagayo project: voices of phrases of words of phonemes, counts sometimes wrong."""
+    fps = draw(st.sampled_from([24, 30]))
+
+    def count(n):
+        return number_text(draw, n + draw(st.sampled_from([0, 0, 0, 0, 1, -1])), integer=True)
+
+    out = ["lipsync version 1", "a.wav", number_text(draw, fps, integer=True)]
+    voices = draw(st.integers(0, 2))
+    out += [number_text(draw, 3 * fps, integer=True), count(voices)]
+    for v in range(voices):
+        out += [f"\tVoice {v}", "\ttext"]
+        rows = draw(intervals())
+        out += [count(1), "\t\ttext", "\t\t0", number_text(draw, 3 * fps, integer=True), count(len(rows))]
+        for s, e, _ in rows:
+            labels = draw(st.lists(st.one_of(st.sampled_from(PGO_LABELS), label_st), max_size=3))
+            out.append(f"\t\t\tw {number_text(draw, s * fps, integer=True)} "
+                       f"{number_text(draw, e * fps, integer=True)} {count(len(labels))}")
+            out += [f"\t\t\t\t{number_text(draw, s * fps + k, integer=True)} {lab or 'rest'}"
+                    for k, lab in enumerate(labels)]
+    return "\n".join(out) + "\n"
+
+
 def gen_audacity(draw) -> str:
     out = []
     for s, e, lab in draw(intervals()):
@@ -415,7 +442,7 @@ def gen_elevenlabs(draw) -> str:
 
 
 GENERATORS = {"textgrid": gen_textgrid, "gentle": gen_gentle, "rhubarb-tsv": gen_rhubarb_tsv,
-              "rhubarb-json": gen_rhubarb_json, "rhubarb-xml": gen_rhubarb_xml, "moho": gen_moho,
+              "rhubarb-json": gen_rhubarb_json, "rhubarb-xml": gen_rhubarb_xml, "moho": gen_moho, "pgo": gen_pgo,
               "timit": gen_timit, "audacity": gen_audacity,
               "polly": gen_polly, "azure": gen_azure, "whisper": gen_whisper, "elevenlabs": gen_elevenlabs}
 
@@ -579,6 +606,9 @@ ALLOC_LIMIT_BYTES = 4 << 20
 HUGE_CASES = {
     # Moho: a frame number of 10^k (1-based frames at 24 fps) must not make a per-frame array.
     "moho": lambda k: f"MohoSwitch1\n1 rest\n{10 ** k} AI\n{10 ** k + 5} rest\n",
+    # Papagayo: a frame number, and a count of phrases, of 10^k.
+    "pgo": lambda k: (f"lipsync version 1\na.wav\n24\n{10 ** k}\n1\n\tV\n\tt\n\t{10 ** k}\n\t\tt\n\t\t0\n"
+                      f"\t\t{10 ** k}\n\t\t1\n\t\t\tw 1 {10 ** k} 2\n\t\t\t\t1 AI\n\t\t\t\t{10 ** k} MBP\n"),
     # TIMIT: a sample count of 10^k.
     "timit": lambda k: f"0 {10 ** k} h#\n{10 ** k} {2 * 10 ** k} ay\n",
     "rhubarb-tsv": lambda k: f"0.00\tX\n1e{k}\tA\n2e{k}\tX\n",
@@ -928,3 +958,160 @@ def test_deeply_nested_yaml_is_refused_not_a_crash(loader, shape, tmp_path):
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert result.returncode == 2, f"exit {result.returncode}: {result.stderr[-500:]}"
     assert str(target) in result.stderr
+
+
+# --------------------------------------------------------------------------- the editor's document
+
+#: Any JSON value (NaN and the infinities included: Python's json module reads them).
+json_values = st.recursive(
+    st.none() | st.booleans() | st.integers(-2**70, 2**70) | st.floats() | st.text(max_size=20),
+    lambda inner: st.lists(inner, max_size=5) | st.dictionaries(st.text(max_size=10), inner, max_size=5),
+    max_leaves=25)
+
+
+@st.composite
+def editor_documents(draw, base: dict):
+    """A bank document as the editor page sends it: random JSON, or the real one with random
+    parts replaced, removed or retyped (so that validation goes deep)."""
+    if draw(st.integers(0, 4)) == 0:
+        return draw(st.dictionaries(st.sampled_from(["name", "rest", "warp", "symmetry", "visemes", "x"]),
+                                    json_values, max_size=6))
+    doc = copy.deepcopy(base)
+    for _ in range(draw(st.integers(1, 4))):
+        node = doc
+        for _ in range(draw(st.integers(0, 5))):  # walk down a random path
+            keys = list(node) if isinstance(node, dict) else list(range(len(node))) if isinstance(node, list) else []
+            if not keys:
+                break
+            key = draw(st.sampled_from(keys))
+            if not isinstance(node[key], (dict, list)) or draw(st.integers(0, 3)) == 0:
+                break
+            node = node[key]
+        if isinstance(node, dict) and node:
+            key = draw(st.sampled_from(sorted(node)))
+            action = draw(st.sampled_from(["replace", "delete", "add"]))
+            if action == "replace":
+                node[key] = draw(json_values)
+            elif action == "delete":
+                del node[key]
+            else:
+                node[draw(st.text(max_size=8))] = draw(json_values)
+        elif isinstance(node, list) and node:
+            node[draw(st.integers(0, len(node) - 1))] = draw(json_values)
+    return doc
+
+
+@pytest.fixture(scope="module")
+def editor_client(tmp_path_factory):
+    from starlette.testclient import TestClient
+
+    from lipsync.editor import Editor, make_app
+    from lipsync.web import Session
+
+    folder = synthetic.write_bank(tmp_path_factory.mktemp("editor-fuzz") / "bank")
+    editor = Editor(folder)
+    session = Session.open()
+    client = TestClient(make_app(editor, session), base_url=session.origin, raise_server_exceptions=False)
+    client.headers["X-Lipsync-Token"] = session.token
+    base = client.get("/api/bank").json()["doc"]
+    yield client, editor, base
+    editor.close()
+    session.close()
+
+
+@FUZZ
+@given(data=st.data())
+def test_editor_document_fuzz(editor_client, data):
+    """Every malformed document gets 422 with a message (never 500); a document that is
+    accepted loads as a bank, and a refused save leaves bank.yaml as it was."""
+    client, editor, base = editor_client
+    doc = data.draw(editor_documents(base), label="doc")
+    route = data.draw(st.sampled_from(["/api/draft", "/api/save"]), label="route")
+    before = editor.yaml_path.read_bytes()
+    with watchdog(f"POST {route}"):
+        r = client.post(route, content=json.dumps({"doc": doc}, allow_nan=True))
+    assert r.status_code in (200, 409, 413, 422), (r.status_code, r.text[:500])
+    body = r.json()
+    if r.status_code == 200:
+        assert body["ok"] is True
+        if route == "/api/save":
+            check_bank(Bank.load(editor.folder))
+    else:
+        assert body["ok"] is False and body["error"]["message"].strip()
+        assert editor.yaml_path.read_bytes() == before
+
+
+# --------------------------------------------------------------------------- lipsync serve's query options
+
+#: What a client might put in ``fps=``: numbers of every kind, and text that is not one.
+fps_texts = st.one_of(st.floats().map(repr), st.integers(-10**6, 10**6).map(str),
+                      st.sampled_from(["0", "-0", "1", "120", "121", "0.5", "nan", "NaN", "inf", "-inf", "1e308",
+                                       "1e-308", "", " 25", "25 ", "0x19", "25,0", "٢٥", "1_0"]),
+                      st.text(max_size=12))
+
+
+@pytest.fixture(scope="module")
+def serve_client(tmp_path_factory):
+    from starlette.testclient import TestClient
+
+    from lipsync.server import LiveServer, ServeConfig
+    from lipsync.web import Session
+
+    folder = synthetic.write_bank(tmp_path_factory.mktemp("serve-fuzz") / "bank", synthetic.RHUBARB_SHAPES)
+    session = Session.open()
+    server = LiveServer(ServeConfig(bank=str(folder), method="dissolve"), session=session)
+    client = TestClient(server.app, base_url=session.origin, raise_server_exceptions=False)
+    yield client, session
+    server.close()
+    session.close()
+
+
+def _job_end(client, session, job: str) -> dict:
+    deadline = time.monotonic() + 60
+    while True:
+        state = client.get(session.url(f"/api/jobs/{job}")).json()
+        if state["state"] not in ("queued", "running"):
+            return state
+        assert time.monotonic() < deadline, state
+        time.sleep(0.01)
+
+
+@FUZZ
+@given(data=st.data())
+def test_serve_render_query_fuzz(serve_client, data):
+    """POST /api/render with any query options: 202 only for valid ones (fps as `lipsync render
+    --fps` takes it), an error status with a message otherwise, never 500; an accepted job
+    ends done (at the fps asked for) or with an error naming the upload."""
+    from urllib.parse import urlencode
+
+    client, session = serve_client
+    params = {}
+    if data.draw(st.booleans(), label="has fps"):
+        params["fps"] = data.draw(fps_texts, label="fps")
+    if data.draw(st.booleans(), label="has format"):
+        params["format"] = data.draw(st.sampled_from(["rhubarb-tsv", "tsv", "timit", "audio", "nope", ""])
+                                     | st.text(max_size=10), label="format")
+    if data.draw(st.booleans(), label="has text"):
+        params["text"] = data.draw(st.text(max_size=40), label="text")
+    name = data.draw(st.sampled_from(["cues.tsv", "a.phn", "x", "", "../../etc/passwd", "a.TSV", "a.b.c.tsv"])
+                     | st.text(max_size=20), label="name")
+    params["name"] = name
+    valid_body = data.draw(st.integers(0, 5), label="body kind") == 0
+    body = b"0.00\tX\n0.20\tD\n0.40\tX\n" if valid_body else data.draw(st.binary(max_size=200), label="body")
+    url = session.url("/api/render") + "&" + urlencode(params)
+    with watchdog("POST /api/render"):
+        r = client.post(url, content=body)
+    assert r.status_code in (202, 400, 404, 413, 503), (r.status_code, r.text[:300])
+    if r.status_code != 202:
+        assert r.json()["error"].strip()
+        return
+    fps = params.get("fps")
+    if fps is not None:  # accepted: a finite rate within the CLI's range
+        assert 1 <= float(fps) <= 120
+    state = _job_end(client, session, r.json()["job"])
+    assert state["state"] in ("done", "error"), state
+    if state["state"] == "error":
+        assert state["error"].strip() and "render failed" not in state["error"], state
+    elif valid_body and params.get("format") in (None, "rhubarb-tsv", "tsv"):
+        rate = 25.0 if fps is None else float(fps)
+        assert state["frames"] == math.ceil(0.4 * rate - 1e-9), (state, rate)

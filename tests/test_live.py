@@ -249,7 +249,9 @@ def test_bad_pushes_are_input_errors_and_leave_the_animator_working(bank):
     live.push(0.5, 1.0, "M")
     assert live.horizon == 1.0 and live.spec_at(0.75).shown == "A"
     with pytest.raises(InputError):
-        live.frame_at(float("inf"))
+        live.frame_at(float("nan"))
+    # any number is a time (issue 19): infinity is past all data, so rest
+    assert live.spec_at(float("inf")).shown == bank.rest
 
 
 def test_words_pushed_one_by_one_give_the_frames_of_their_phones(bank):

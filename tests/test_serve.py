@@ -428,3 +428,37 @@ def test_render_job_from_audio_and_text_gives_video_with_the_speech(srv, tmp_pat
     assert len(frames) == 75  # 2.97 s of audio at 25 fps
     # the aligned speech moves the mouth: frames in the middle differ from the first (rest)
     assert max(np.abs(f - frames[0]).mean() for f in frames[20:60]) > 1.0
+
+
+# ---------------------------------------------------------------------------- numeric options (issue 19, item 3)
+
+@pytest.mark.parametrize("option, value", [
+    ("--max-upload-mb", "nan"), ("--max-upload-mb", "inf"), ("--max-upload-mb", "-1"), ("--max-upload-mb", "1e30"),
+    ("--idle-timeout", "nan"), ("--idle-timeout", "inf"), ("--idle-timeout", "0"), ("--idle-timeout", "-5"),
+    ("--max-sessions", "0"), ("--workers", "0"), ("--workers", "-3"), ("--quality", "1000"), ("--port", "70000"),
+])
+def test_every_numeric_option_is_checked_before_serving(capsys, option, value):
+    from lipsync.cli import main
+
+    assert main(["serve", "--port", "0", option, value]) == 2
+    err = capsys.readouterr().err
+    assert f"{option} must be" in err and "Traceback" not in err and "open http" not in err, err
+
+
+def test_serve_config_refuses_non_finite_numbers():
+    from lipsync.errors import InputError
+
+    for bad in (dict(idle_timeout=float("nan")), dict(idle_timeout=float("inf")), dict(max_upload=10**12),
+                dict(max_sessions=1.5), dict(workers=0), dict(fps=0.0), dict(fps=26.0), dict(quality=5)):
+        with pytest.raises(InputError):
+            ServeConfig(**bad)
+
+
+def test_render_query_fps_is_checked_as_the_cli_checks_it(srv):
+    for fps in ("0", "-25", "nan", "inf", "121", "1e308", "abc", ""):
+        r = httpx.post(srv.url("/api/render") + f"&name=hello.phn&fps={fps}", content=HELLO.read_bytes())
+        assert r.status_code == 400 and "frame rate" in r.json()["error"], (fps, r.text)
+    r = httpx.post(srv.url("/api/render") + "&name=hello.phn&fps=10", content=HELLO.read_bytes())
+    assert r.status_code == 202
+    state, _ = _wait_job(srv, r.json()["job"])
+    assert state["state"] == "done" and state["frames"] == 30  # 3 s at 10 fps, not at the default 25

@@ -180,3 +180,73 @@ def test_stale_temp_files_of_dead_processes_are_removed(bank_dir):
     stale.write_bytes(b"half")
     preprocess(bank, store=store, jobs=1, quiet=True)
     assert not stale.exists()
+
+
+def _rewrite_entry(path, edit_body):
+    """Change an entry's bytes with ``edit_body(bytearray)`` and recompute its CRC: damage that
+    only the values themselves can reveal."""
+    import zlib
+
+    data = bytearray(path.read_bytes())
+    body = data[12:]
+    edit_body(body)
+    data[12:] = body
+    data[8:12] = zlib.crc32(bytes(body)).to_bytes(4, "little")
+    path.write_bytes(bytes(data))
+
+
+@pytest.mark.parametrize("where", ["field", "header"])
+def test_non_finite_values_under_a_valid_crc_are_a_miss(bank_dir, where):
+    # issue 19, item 8: NaN in a stored field made --method splat fail with a traceback
+    bank = Bank.load(bank_dir)
+    store = FlowStore(bank_dir / "store")
+    preprocess(bank, store=store, jobs=1, quiet=True)
+    path = store.pair_path(store.pair_key(bank, "X", "O", normalise(bank).axis))
+    good = path.read_bytes()
+    if where == "field":
+        lo, hi = _member_span(path, "forward")
+
+        def edit(body):
+            body[lo - 12:lo - 12 + 2] = np.array([np.nan], np.float16).tobytes()
+    else:
+        hlen = int.from_bytes(good[12:16], "little")
+        header = good[16:16 + hlen]
+        assert b'"deadzone": 0.25' in header
+
+        def edit(body):
+            at = 4 + header.index(b'"deadzone": 0.25') + len(b'"deadzone": ')
+            body[at:at + 4] = b"NaN "
+    _rewrite_entry(path, edit)
+    want = Renderer(bank, store=FlowStore(bank_dir / "fresh"), method="splat").render("X", "O", 0.4).copy()
+    with pytest.warns(StoreWarning, match="unusable flow store entry") as caught:
+        got = Renderer(bank, store=store, method="splat").render("X", "O", 0.4)
+    assert any(path.name in str(w.message) for w in caught)
+    np.testing.assert_array_equal(got, want)
+    assert path.read_bytes() == good  # recomputed and written again
+
+
+def test_a_folder_where_an_entry_belongs_is_replaced(bank_dir):
+    # issue 19, item 8: a miss for render, but preprocess exited 1
+    bank = Bank.load(bank_dir)
+    store = FlowStore(bank_dir / "store")
+    path = store.pair_path(store.pair_key(bank, "X", "O", normalise(bank).axis))
+    (path / "junk").mkdir(parents=True)
+    result = run_cli("preprocess", str(bank_dir), "--store", str(store.root), "--quiet")
+    assert result.returncode == 0, result.stderr
+    assert path.is_file() and store.get_pair(bank, "X", "O") is not None
+
+
+def test_check_does_not_count_damaged_entries(bank_dir):
+    bank = Bank.load(bank_dir)
+    store = FlowStore(bank_dir / ".lipsync")
+    preprocess(bank, store=store, jobs=1, quiet=True)
+    result = run_cli("check", str(bank_dir))
+    assert "6 of 6 pairs present" in result.stdout
+    path = store.pair_path(store.pair_key(bank, "X", "O", normalise(bank).axis))
+    data = bytearray(path.read_bytes())
+    data[len(data) // 2] ^= 0x10
+    path.write_bytes(bytes(data))
+    result = run_cli("check", str(bank_dir))
+    assert result.returncode == 0
+    assert "5 of 6 pairs present, 1 damaged" in result.stdout, result.stdout
+    assert path.name in result.stderr and "checksum" in result.stderr

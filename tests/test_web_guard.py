@@ -155,3 +155,36 @@ def test_resolve_inside(tmp_path):
 def test_bad_content_length(client, session):
     r = client.post(f"/api/echo?token={session.token}", content=b"x", headers={"content-length": "abc"})
     assert r.status_code == 400
+
+
+@pytest.mark.parametrize("name", ["origin", "host", "x-lipsync-token"])
+def test_repeated_host_origin_or_token_is_refused(client, session, name):
+    # A valid value first and a foreign one second passed when only the first was read.
+    good = {"origin": session.origin, "host": f"127.0.0.1:{session.port}", "x-lipsync-token": session.token}[name]
+    bad = {"origin": "http://evil.example", "host": "evil.example", "x-lipsync-token": "nope"}[name]
+    for pair in ([good, bad], [good, good]):
+        headers = [(name, v) for v in pair] + ([] if name == "host" else [("host", f"127.0.0.1:{session.port}")])
+        r = client.post(f"/api/echo?token={session.token}", content=b"x", headers=headers)
+        assert r.status_code == 400 and "more than once" in r.text, (pair, r.status_code, r.text)
+    assert client.post(f"/api/echo?token={session.token}", content=b"x",
+                       headers={"origin": session.origin}).json() == {"n": 1}
+
+
+def test_repeated_origin_refused_by_the_real_server(session):
+    import socket
+
+    running = start_in_thread(make_app(session, max_body=1000), session)
+    try:
+        for origins in ([session.origin, "http://evil.example"], [session.origin]):
+            request = (f"POST /api/echo?token={session.token} HTTP/1.1\r\nHost: 127.0.0.1:{session.port}\r\n"
+                       + "".join(f"Origin: {o}\r\n" for o in origins)
+                       + "Content-Length: 1\r\nConnection: close\r\n\r\nx").encode()
+            with socket.create_connection(("127.0.0.1", session.port), timeout=10) as sock:
+                sock.sendall(request)
+                reply = b""
+                while chunk := sock.recv(65536):
+                    reply += chunk
+            status = int(reply.split(b" ", 2)[1])
+            assert status == (400 if len(origins) == 2 else 200), reply[:300]
+    finally:
+        running.stop()

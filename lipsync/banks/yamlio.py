@@ -18,7 +18,7 @@ from typing import Iterable, List, Mapping
 
 import yaml
 
-from ..store import atomic_write_bytes
+from .._files import atomic_write_bytes
 
 _PLAIN = re.compile(r"^[A-Za-z_][A-Za-z0-9_.+-]*$")
 
@@ -89,6 +89,9 @@ def dump_bank(doc: Mapping, *, header: Iterable[str] = ()) -> str:
         if key == "visemes" and isinstance(value, Mapping):
             out.append("visemes:")
             for v, entry in value.items():
+                if not isinstance(entry, Mapping):  # written as it is: the loader says what is wrong, at its line
+                    out.append(f"  {_scalar(v)}: {_flow(entry)}")
+                    continue
                 out.append(f"  {_scalar(v)}:")
                 for k2, v2 in entry.items():
                     if k2 == "lines" and isinstance(v2, Mapping):

@@ -132,7 +132,7 @@ def _folder_matches(folder: Path, pack: BankPack) -> bool:
 
 
 def _unpack(pack: BankPack, cache: Path) -> Path:
-    from ..store import atomic_write_bytes
+    from .._files import atomic_write_bytes
 
     banks = cache / "banks"
     target = banks / pack.digest
@@ -216,7 +216,7 @@ def install_entries(local: LocalBank, entries) -> int:
     >>> there.store.get_pair(there.bank, a, b) is not None
     True
     """
-    from ..store import atomic_write_bytes
+    from .._files import atomic_write_bytes
 
     written = 0
     with local.lock:

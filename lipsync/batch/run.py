@@ -122,7 +122,7 @@ class BatchReport:
 
 
 def _write_report(path: Path, report: BatchReport) -> None:
-    from ..store import atomic_write_bytes
+    from .._files import atomic_write_bytes
 
     rows = [{k: getattr(c, k) for k in REPORT_FIELDS} for c in report.clips]
     if path.suffix.lower() == ".csv":

@@ -111,7 +111,7 @@ def read_done(output: Path, key: str) -> Optional[dict]:
 
 def write_done(output: Path, data: bytes, key: str, info: dict) -> None:
     """Write the video then its sidecar, each through a temporary file renamed into place."""
-    from ..store import atomic_write_bytes
+    from .._files import atomic_write_bytes
 
     atomic_write_bytes(output, lambda fh: fh.write(data))
     meta = dict(info, key=key, output_bytes=len(data), output_sha256=hashlib.sha256(data).hexdigest())

@@ -7,12 +7,16 @@ applies, the line), 130 interrupted, 1 anything else.
 from __future__ import annotations
 
 import argparse
+import signal
 import sys
+import threading
 from typing import Callable, List, Optional
 
 from ..errors import InputError
 
 EXIT_OK, EXIT_FAILURE, EXIT_BAD_INPUT, EXIT_INTERRUPTED = 0, 1, 2, 130
+#: After SIGTERM: 128 + 15, the shell's convention for "ended by signal 15".
+EXIT_TERMINATED = 143
 
 # Each command module exposes ``add_parser(subparsers)`` that registers its parser with
 # ``set_defaults(func=run)``; ``run(args) -> int``. Listed here so --help shows them in the
@@ -21,6 +25,7 @@ _COMMAND_MODULES = [
     "render",
     "align",
     "cues",
+    "atlas",
     "timeline",
     "init",
     "check",
@@ -88,16 +93,29 @@ def main(argv: Optional[List[str]] = None) -> int:
 
     argv = sys.argv[1:] if argv is None else list(argv)
     parser = build_parser(argv)
-    args = parser.parse_args(argv)
+    args, extra = parser.parse_known_args(argv)
+    # argparse takes a command's positionals in one run: `lipsync atlas BANK -o OUT T1 T2`
+    # would leave T1 T2 unrecognised. A command naming a list positional in
+    # ``extra_positionals`` gets them appended (options it does not know are still errors).
+    target = getattr(args, "extra_positionals", None)
+    if extra:
+        if target is None or any(e.startswith("-") for e in extra):
+            parser.parse_args(argv)  # argparse's own message and exit code 2
+        getattr(args, target).extend(extra)
     func: Callable[[argparse.Namespace], int] = args.func
     saved = warnings.formatwarning
     warnings.formatwarning = _format_warning
+    terminated: List[int] = []
+    saved_term = _on_sigterm(terminated)
     try:
         return int(func(args) or 0)
     except InputError as exc:
         print(f"lipsync: error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except KeyboardInterrupt:
+        if terminated:
+            print("lipsync: terminated (SIGTERM); no partial output was left behind", file=sys.stderr)
+            return EXIT_TERMINATED
         print("lipsync: interrupted; no partial output was left behind", file=sys.stderr)
         return EXIT_INTERRUPTED
     except BrokenPipeError:
@@ -107,6 +125,23 @@ def main(argv: Optional[List[str]] = None) -> int:
         return EXIT_FAILURE
     finally:
         warnings.formatwarning = saved
+        if saved_term is not None:
+            signal.signal(signal.SIGTERM, saved_term)
+
+
+def _on_sigterm(record: List[int]):
+    """SIGTERM (what ``kill``, systemd and ``docker stop`` send) handled as Ctrl-C is: the
+    running command unwinds through its cleanup (temporary outputs, a server's job folder)
+    instead of dying where it stands. Returns the previous handler (None off the main thread,
+    where Python cannot set one)."""
+    if threading.current_thread() is not threading.main_thread():
+        return None
+
+    def handler(signum, frame):
+        record.append(signum)
+        raise KeyboardInterrupt
+
+    return signal.signal(signal.SIGTERM, handler)
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -68,7 +68,8 @@ def add_timeline_options(parser: argparse.ArgumentParser) -> None:
                        help="input timeline format (default: from the extension, then the content); "
                             f"one of: {', '.join(READERS.names())}")
     group.add_argument("--tier", default=None, metavar="NAME",
-                       help="TextGrid tier to read (default: phones)")
+                       help="TextGrid tier to read (default: phones), or Papagayo .pgo voice "
+                            "(default: the first)")
     group.add_argument("--sample-rate", type=float, default=16000, metavar="N",
                        help="samples per second of TIMIT .phn times (default: 16000)")
     group.add_argument("--moho-fps", type=float, default=DEFAULT_MOHO_FPS, metavar="N",

@@ -34,6 +34,16 @@ def run(args: argparse.Namespace) -> int:
     store = FlowStore.for_bank(bank, args.store)
     pairs = all_pairs(bank.names)
     axis = bank_axis(bank) if bank.symmetry else None
-    present = sum(store.pair_path(store.pair_key(bank, a, b, axis)).exists() for a, b in pairs)
-    print(f"  flow store {store.root}: {present} of {len(pairs)} pairs present")
+    # Present means usable: each entry is read and its checksum checked (a damaged one is a
+    # miss for render and preprocess, so it is not counted; each gets a warning naming it).
+    present = damaged = 0
+    for a, b in pairs:
+        key = store.pair_key(bank, a, b, axis)
+        if store.pair_path(key).exists():
+            if store.load_pair(key, bank.shape) is not None:
+                present += 1
+            else:
+                damaged += 1
+    extra = f", {damaged} damaged (lipsync preprocess recomputes them)" if damaged else ""
+    print(f"  flow store {store.root}: {present} of {len(pairs)} pairs present{extra}")
     return 0

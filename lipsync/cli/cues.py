@@ -5,7 +5,11 @@ what ``lipsync timeline`` prints: gaps to rest, merges, short pauses held, flick
 of the input mapped with the same map as ``render``. It is written in a format other tools
 read (:data:`lipsync.writers.WRITERS`): Rhubarb's TSV, JSON and XML, Moho switch data at
 ``--fps``, a Praat TextGrid, or an Audacity label track; the format comes from ``--format``
-or the output's extension.
+or the output's extension. ``--format atlas --atlas ATLAS.json`` writes the sprite-atlas cell
+of every frame at ``--fps`` instead (the frames ``render`` would draw, each the nearest cell
+of the atlas ``lipsync atlas`` made; the track keeps the atlas' viseme names). Their timing is
+``--timing``, else the ``--bank``'s (its bank.yaml), else the default: give ``--bank`` for a
+bank that sets its own.
 """
 
 from __future__ import annotations
@@ -15,6 +19,7 @@ import os
 import sys
 from typing import Dict
 
+from ..frames import DEFAULT_FPS as DEFAULT_RENDER_FPS
 from ..writers import DEFAULT_FPS, DEFAULT_TIER, WRITERS
 from ._common import add_bank_option, add_quiet_option, add_timeline_options, load_viseme_timeline
 
@@ -22,7 +27,7 @@ from ._common import add_bank_option, add_quiet_option, add_timeline_options, lo
 def add_parser(subparsers) -> argparse.ArgumentParser:
     """Register ``lipsync cues``."""
     parser = subparsers.add_parser(
-        "cues", help="write the viseme track as mouth cues (Rhubarb, Moho, TextGrid, Audacity)",
+        "cues", help="write the viseme track as mouth cues (Rhubarb, Moho, TextGrid, Audacity, atlas frames)",
         description="Write the viseme track the video would show (after the sequencer's rules) as "
                     "mouth cues for other tools: Rhubarb Lip Sync TSV/JSON/XML, Moho switch data, "
                     "a Praat TextGrid or an Audacity label track.")
@@ -32,8 +37,11 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                              "(.tsv, .json, .xml, .dat, .TextGrid, .txt)")
     parser.add_argument("--format", choices=WRITERS.names(), default=None, metavar="NAME",
                         help=f"cue format: {', '.join(WRITERS.names())} (default: from OUT's extension)")
-    parser.add_argument("--fps", type=float, default=DEFAULT_FPS, metavar="N",
-                        help="frame rate of Moho .dat keys (default: 24, Moho's and Rhubarb's default)")
+    parser.add_argument("--fps", type=float, default=None, metavar="N",
+                        help=f"frame rate of Moho .dat keys (default: {DEFAULT_FPS:g}, Moho's and Rhubarb's "
+                             f"default) and of atlas frames (default: {DEFAULT_RENDER_FPS:g}, as lipsync render)")
+    parser.add_argument("--atlas", default=None, metavar="ATLAS.json",
+                        help="for --format atlas: the atlas (from `lipsync atlas`) whose cells the frames name")
     parser.add_argument("--tier-name", default=DEFAULT_TIER, metavar="NAME",
                         help=f"TextGrid tier name (default: {DEFAULT_TIER})")
     add_bank_option(parser)
@@ -51,11 +59,17 @@ def run(args: argparse.Namespace) -> int:
     from ..writers import format_for, write_cues
 
     name = args.format or format_for(args.output)  # a bad name fails before any reading
-    fps = float(args.fps)
+    # atlas frames are the frames a player shows: render's rate; Moho keys: Moho's own
+    default = DEFAULT_RENDER_FPS if WRITERS.get(name).name == "atlas" else DEFAULT_FPS
+    fps = float(default if args.fps is None else args.fps)
     if not (FPS_RANGE[0] <= fps <= FPS_RANGE[1]):
         raise InputError(f"--fps {args.fps:g} is outside {FPS_RANGE[0]:g}..{FPS_RANGE[1]:g}")
     if os.path.isdir(args.output):
         raise InputError("is a folder; give a file name for the cues", path=args.output)
+    if WRITERS.get(name).name == "atlas":
+        return _atlas_frames(args, fps)
+    if args.atlas is not None:
+        raise InputError("--atlas is for --format atlas only")
     base = load_map(args.map or DEFAULT_MAP)  # the map's own names, whatever the bank calls them
     if args.bank is not None:
         timeline, pmap, to_map, rest = _bank_track(args, base)
@@ -75,6 +89,42 @@ def run(args: argparse.Namespace) -> int:
                closures=[to_map.get(c, c) for c in pmap.closures], duration=timeline.duration)
     if not args.quiet:
         print(f"lipsync: wrote {len(cues)} cues ({WRITERS.get(name).name}) to {args.output}", file=sys.stderr)
+    return 0
+
+
+def _atlas_frames(args: argparse.Namespace, fps: float) -> int:
+    """frames.json: the timeline in the atlas' viseme names, sequenced as ``render`` does,
+    each frame the nearest cell of the atlas."""
+    from ..atlas.schema import load_atlas
+    from ..coarticulation import resolve_timing, viseme_classes
+    from ..errors import InputError
+    from ..sequencer import plan_segments
+    from ..writers import write_cues
+
+    if args.atlas is None:
+        raise InputError("--format atlas needs --atlas ATLAS.json (write one with `lipsync atlas BANK -o ATLAS.png`)")
+    atlas = load_atlas(args.atlas)
+    bank = None
+    if args.bank is not None:
+        from ..bank import Bank
+
+        bank = Bank.load(args.bank)
+        if tuple(bank.names) != atlas.visemes or bank.rest != atlas.rest:
+            raise InputError(f"the bank's visemes ({', '.join(bank.names)}; rest {bank.rest}) are not the "
+                             f"atlas' ({', '.join(atlas.visemes)}; rest {atlas.rest})", path=args.atlas)
+    # the atlas names the bank's visemes and rest: the track is matched to them as to a bank
+    timeline, pmap = load_viseme_timeline(args, rest=atlas.rest, viseme_names=atlas.visemes)
+    plan = plan_segments(timeline, rest=atlas.rest, closures=pmap.closures)
+    # the timing render would use: --timing, else the bank's (bank.yaml), else the default
+    timing = resolve_timing(args.timing, bank)
+    write_cues(plan, args.output, "atlas", rest=atlas.rest, fps=fps, closures=pmap.closures,
+               duration=timeline.duration, timing=timing, timeline=timeline,
+               classes=viseme_classes(pmap, atlas.rest), atlas=atlas)
+    if not args.quiet:
+        from ..sequencer import frame_count
+
+        print(f"lipsync: wrote {frame_count(timeline.duration, fps)} frames of {atlas.path} at {fps:g} fps "
+              f"to {args.output}", file=sys.stderr)
     return 0
 
 

@@ -16,7 +16,8 @@ def add_parser(sub) -> None:
                        description="Read a phoneme or viseme timeline, map it to visemes, sequence it and "
                                    "render every frame by morphing along the cached flows.")
     p.add_argument("timeline", metavar="TIMELINE", help="timeline file (.phn, .TextGrid, Gentle .json, "
-                                                        "Rhubarb .tsv/.json/.xml, Moho .dat, Audacity .txt), "
+                                                        "Rhubarb .tsv/.json/.xml, Moho .dat, Papagayo .pgo, "
+                                                        "Audacity .txt), "
                                                         "or speech audio (.wav, .mp3, ...: aligned, then "
                                                         "muxed; --text gives its transcript)")
     p.add_argument("-o", "--output", required=True, metavar="OUT",
@@ -57,6 +58,9 @@ def run(args: argparse.Namespace) -> int:
     from ..clip import composite_from_options, load_background, render_clip
     from ..errors import InputError
 
+    from ..encode.mp4 import check_preset
+
+    check_preset(args.preset)  # before loading anything
     if args.mouth_only and (args.over or args.at or args.scale is not None):
         raise InputError("--mouth-only renders the mouth alone: it cannot be combined with --over/--at/--scale")
     background = load_background(args.background) if args.background is not None else None

@@ -44,17 +44,18 @@ def add_parser(sub) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..errors import InputError
-    from ..server import ServeConfig, serve
+    from ..errors import check_number
+    from ..server import MAX_UPLOAD_LIMIT, ServeConfig, serve
 
-    if not 10 <= args.quality <= 100:
-        raise InputError(f"--quality must be 10..100, got {args.quality}")
+    check_number(args.port, "--port", 0, 65535, integer=True)
+    # the other numbers are checked by ServeConfig; this one first, before it becomes bytes
+    max_upload_mb = check_number(args.max_upload_mb, "--max-upload-mb", 1 / 1024, MAX_UPLOAD_LIMIT / (1 << 20))
     if args.host not in ("127.0.0.1", "localhost", "::1"):
         print(f"lipsync serve: warning: listening on {args.host}: other machines can reach this server "
               f"(the token still guards it)", file=sys.stderr)
     config = ServeConfig(bank=args.bank, store=args.store, map=args.map, timing=args.timing, method=args.method,
                          fps=args.fps, quality=args.quality, max_sessions=args.max_sessions,
-                         idle_timeout=args.idle_timeout, max_upload=int(args.max_upload_mb * (1 << 20)),
+                         idle_timeout=args.idle_timeout, max_upload=int(max_upload_mb * (1 << 20)),
                          workers=args.workers, quiet=args.quiet)
     try:
         serve(config, host=args.host, port=args.port)

@@ -40,6 +40,7 @@ from typing import Dict, List, Optional, Tuple
 import numpy as np
 import yaml
 
+from .. import _yaml
 from ..bank import Bank
 from ..banks.yamlio import dump_bank, header_comments, write_bank_text
 from ..errors import BankError, InputError
@@ -243,7 +244,7 @@ class Editor:
         text = self.yaml_path.read_text(encoding="utf-8")
         self._on_disk = text  # what we last read or wrote: a save must not clobber other edits
         self.header = header_comments(text)
-        self.doc = yaml.safe_load(text)
+        self.doc = _yaml.safe_load(text)
         self.store = store or FlowStore.for_bank(bank)
         # Decoded images by file name: validation reuses them instead of decoding per edit.
         self.images = {self.doc["visemes"][v]["image"]: bank.images[v] for v in bank.names}

@@ -12,6 +12,7 @@ from typing import Optional, Tuple
 
 import numpy as np
 
+from .._files import remove_stale_partials
 from ..errors import PathLike
 from ..registry import Registry
 
@@ -70,11 +71,17 @@ def write_all(stream, data) -> None:
 
 
 def check_output_folder(folder: str, out: str) -> None:
-    """Fail early, with a message naming the folder, if OUT's folder cannot take files."""
-    if not os.path.exists(folder):
-        raise FileNotFoundError(errno.ENOENT, f"cannot write {out}: output folder does not exist", folder)
-    if not os.path.isdir(folder):
+    """Make OUT's folder if it is missing (as every command's ``-o`` does), or fail early
+    with a message naming it; then remove partial outputs of OUT that killed runs left."""
+    if os.path.exists(folder) and not os.path.isdir(folder):
         raise NotADirectoryError(errno.ENOTDIR, f"cannot write {out}: output folder is not a folder", folder)
+    try:
+        os.makedirs(folder or ".", exist_ok=True)
+    except OSError as exc:
+        raise type(exc)(exc.errno, f"cannot write {out}: cannot make its folder ({exc.strerror})", folder) from None
+    # ".OUT.partial-PID.mp4" (or a PNG sequence's folder, or the two-pass ".OUT.video-PID.mp4")
+    # of a process that no longer exists: a SIGKILL mid-render; never a running render's.
+    remove_stale_partials(out, tags=("partial", "video"))
 
 
 class Writer:

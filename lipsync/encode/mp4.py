@@ -16,11 +16,11 @@ from typing import Dict, List, Optional, Tuple
 
 import numpy as np
 
-from ..errors import PathLike
+from ..errors import InputError, PathLike
 from .base import ENCODERS
 from .ffmpeg import PipeWriter
 
-__all__ = ["Mp4Writer", "X264_PRESETS"]
+__all__ = ["Mp4Writer", "X264_PRESETS", "X264_OWN_PRESETS", "check_preset"]
 
 #: Named encoder settings beyond x264's own presets: name -> (x264 preset, -x264-params).
 #: Any other ``preset`` is passed to x264 as it is.
@@ -46,6 +46,28 @@ X264_PRESETS: Dict[str, Tuple[str, Optional[str]]] = {
     "talking-head": ("ultrafast", "cabac=1:bframes=3:b-adapt=0:mbtree=1:rc-lookahead=5:deblock=1:"
                                   "8x8dct=1:partitions=i8x8,i4x4"),
 }
+
+#: x264's own speed presets (``x264 --fullhelp``), fastest first.
+X264_OWN_PRESETS = ("ultrafast", "superfast", "veryfast", "faster", "fast", "medium", "slow", "slower",
+                    "veryslow", "placebo")
+
+
+def check_preset(preset: str) -> str:
+    """``preset`` if x264 (or :data:`X264_PRESETS`) knows it, else InputError listing the valid ones.
+
+    Checked before any work: an unknown preset used to surface only when ffmpeg, started
+    after the flows were computed, refused it (exit 1 and a page of its output).
+
+    Examples
+    --------
+    >>> check_preset("veryfast"), check_preset("talking-head")
+    ('veryfast', 'talking-head')
+    """
+    if preset not in X264_PRESETS and preset not in X264_OWN_PRESETS:
+        raise InputError(f"--preset {preset!r} is not an x264 preset; valid: "
+                         f"{', '.join(list(X264_PRESETS) + list(X264_OWN_PRESETS))}")
+    return preset
+
 
 # ffmpeg muxer for each container extension the "mp4" encoder accepts, and whether the
 # container takes +faststart (moov atom first so playback starts before download ends).
@@ -83,7 +105,7 @@ class Mp4Writer(PipeWriter):
                  crf: int = 18, preset: str = "medium", quiet: bool = False, total: Optional[int] = None,
                  frames: Optional[int] = None, threads: Optional[int] = None, channels: int = 3):
         self.crf = int(crf)
-        self.preset = str(preset)
+        self.preset = check_preset(str(preset))
         self.threads = None if threads is None else max(1, int(threads))
         super().__init__(out, fps=fps, size=size, audio=audio, quiet=quiet, total=total, frames=frames,
                          channels=channels)

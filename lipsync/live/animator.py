@@ -33,13 +33,17 @@ from ..phonemes import DEFAULT_MAP, PhonemeMap, bank_viseme_timeline, check_map_
 from ..frames import DEFAULT_FPS
 from ..sequencer import FrameSpec
 from ..store import FlowStore
-from ..timeline import PHONEME, VISEME, Segment, Timeline
+from ..timeline import MAX_TIMELINE_S, PHONEME, VISEME, Segment, Timeline
 from .causal import LOOKAHEAD_S, CausalSequencer
 from .pool import RendererPool
 
 #: What a pushed label may be; ``None`` (auto) tries them in the order of
 #: :meth:`LiveAnimator.resolve`.
 KINDS = ("viseme", "phoneme", "word")
+
+#: Seconds after the last possible data (MAX_TIMELINE_S) by which every frame is rest: the
+#: relaxation (RELAX_S) is well under it.
+_REST_AFTER_S = 60.0
 
 #: Longest single event accepted: a phone or word longer than a minute is a wrong time
 #: (milliseconds sent as seconds), not speech, and would plan thousands of frames at once.
@@ -186,6 +190,8 @@ class LiveAnimator:
             raise InputError(f"event {label!r} at {start!r}-{end!r}: times must be finite with 0 <= start <= end")
         if t1 - t0 > MAX_EVENT_S:
             raise InputError(f"event {label!r} lasts {t1 - t0:g} s, over {MAX_EVENT_S:g} s (times in ms?)")
+        if t1 > MAX_TIMELINE_S:
+            raise InputError(f"event {label!r} ends at {t1:g} s, past the limit of {MAX_TIMELINE_S:g} s (24 hours)")
         if not isinstance(label, str) or not label.strip() and label != "":
             raise InputError(f"event label must be text, got {label!r}")
         if kind is not None and kind not in KINDS:
@@ -256,9 +262,18 @@ class LiveAnimator:
         return t <= self.final_until
 
     def index(self, t: float) -> int:
-        """The frame number shown at time ``t`` (the frame whose interval holds ``t``; >= 0)."""
-        if not math.isfinite(t):
-            raise InputError(f"time must be finite, got {t}")
+        """The frame number shown at time ``t`` (the frame whose interval holds ``t``; >= 0).
+
+        Any number is a time: before 0 is frame 0, and a time past everything that can be
+        pushed (:data:`~lipsync.timeline.MAX_TIMELINE_S`, infinity included) is a frame of
+        rest. NaN is refused (InputError): a broken clock, not a time.
+        """
+        t = float(t)
+        if math.isnan(t):
+            raise InputError("time must be a number, got nan")
+        # Pushed data ends by MAX_TIMELINE_S and relaxes within seconds: every later frame
+        # is rest, so clamping there keeps the frame number finite without changing a frame.
+        t = min(max(t, 0.0), MAX_TIMELINE_S + _REST_AFTER_S)
         return max(int(math.floor(t * self.fps + 1e-9)), 0)
 
     def spec(self, n: int) -> FrameSpec:
@@ -279,7 +294,9 @@ class LiveAnimator:
         """The frame for playback time ``t`` seconds, RGB ``uint8`` ``(H, W, 3)`` (RGBA ``(H, W, 4)``
         for a bank with transparency).
 
-        Uses only what has been pushed; past the data the head holds, then rests.
+        Uses only what has been pushed; past the data the head holds, then rests. Never
+        raises for a number (a negative time is frame 0, a huge or infinite one rest); a
+        NaN time is refused with InputError.
         """
         return self.frame(self.index(t), out=out)
 

@@ -71,7 +71,7 @@ from typing import Iterable, List, Mapping, Optional, Tuple
 
 from ..sequencer import (HOLD_HALF_WIDTH_S, MAX_HELD_PAUSE_S, MAX_TRANSITION_S, FrameSpec, check_fps,
                          frame_count, frame_specs, plan_segments, plan_transitions)
-from ..timeline import VISEME, Segment, Timeline
+from ..timeline import MAX_TIMELINE_S, VISEME, Segment, Timeline
 from ..timing import DEFAULT_CURVE, get_curve, is_model
 
 #: Data needed past a frame's time for the frame to be final (see the module docstring):
@@ -169,9 +169,10 @@ class CausalSequencer:
         added = False
         for start, end, label in segments:
             start, end = float(start), float(end)
-            if not (math.isfinite(start) and math.isfinite(end)) or end < start or start < 0:
+            if not (math.isfinite(start) and math.isfinite(end)) or end < start or start < 0 \
+                    or end > MAX_TIMELINE_S:
                 raise ValueError(f"segment {start:g}-{end:g} {label!r}: times must be finite, "
-                                 f"0 <= start <= end")
+                                 f"0 <= start <= end <= {MAX_TIMELINE_S:g}")
             if start < self._horizon - _OVERLAP_TOLERANCE_S:
                 raise ValueError(f"segment {start:g}-{end:g} {label!r} starts before the end of the "
                                  f"track so far ({self._horizon:g} s): push in time order")

@@ -33,7 +33,8 @@ from .base import READERS, Reader, ReadOptions
 __all__ = ["MODULES", "READERS", "Reader", "ReadOptions", "load_all", "read_timeline"]
 
 # Audio comes last: its sniffing checks binary magic numbers no text format has.
-MODULES = ["textgrid", "gentle", "rhubarb", "polly", "azure", "words", "moho", "timit", "audacity", "grid", "audio"]
+MODULES = ["textgrid", "papagayo", "gentle", "rhubarb", "polly", "azure", "words", "moho", "timit", "audacity", "grid",
+           "audio"]
 
 _loaded = False
 

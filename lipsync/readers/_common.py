@@ -12,7 +12,7 @@ import re
 from typing import Iterable, List, Optional, Tuple
 
 from ..errors import TimelineError
-from ..timeline import _OVERLAP_TOLERANCE_S, Segment, Timeline
+from ..timeline import _OVERLAP_TOLERANCE_S, MAX_TIMELINE_S, Segment, Timeline
 
 Row = Tuple[float, float, str, Optional[int]]
 
@@ -92,8 +92,8 @@ def build(path: str, rows: Iterable[Row], kind: str, *, stated_end: Optional[flo
           sort: bool = False) -> Timeline:
     """Check rows and make a Timeline; empty labels and zero-length rows become gaps.
 
-    Rules (each a TimelineError naming the file and the row's line): times are finite and
-    not negative; an end is not before its start; rows are in time order and do not overlap
+    Rules (each a TimelineError naming the file and the row's line): times are finite, not
+    negative and at most :data:`~lipsync.timeline.MAX_TIMELINE_S`; an end is not before its start; rows are in time order and do not overlap
     (overlaps below ``_OVERLAP_TOLERANCE_S`` are float noise from the writing tool and are
     snapped to the previous end). ``sort=True`` is for formats whose rows are not required to
     be in order (Audacity label tracks).
@@ -109,6 +109,9 @@ def build(path: str, rows: Iterable[Row], kind: str, *, stated_end: Optional[flo
                 raise TimelineError(f"{what} time is not a finite number", path=path, line=line)
             if value < 0:
                 raise TimelineError(f"negative {what} time {value:g}", path=path, line=line)
+            if value > MAX_TIMELINE_S:
+                raise TimelineError(f"{what} time {value:g} s is past the limit of {MAX_TIMELINE_S:g} s (24 hours; "
+                                    f"milliseconds or samples read as seconds?)", path=path, line=line)
         if end < start:
             raise TimelineError(f"end {end:g} is before start {start:g}", path=path, line=line)
         if start < prev_start:
@@ -129,6 +132,9 @@ def build(path: str, rows: Iterable[Row], kind: str, *, stated_end: Optional[flo
         segments.append(Segment(float(start), float(end), label))
     if stated_end is not None and not math.isfinite(stated_end):
         stated_end = None
+    if stated_end is not None and stated_end > MAX_TIMELINE_S:
+        raise TimelineError(f"the file's end time {stated_end:g} s is past the limit of {MAX_TIMELINE_S:g} s "
+                            f"(24 hours)", path=path)
     return Timeline(tuple(segments), kind=kind, path=path, stated_end=stated_end)
 
 

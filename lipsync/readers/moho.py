@@ -8,7 +8,7 @@ Labels are visemes (Preston Blair names from Papagayo, A-H/X from Rhubarb).
 from __future__ import annotations
 
 from ..errors import TimelineError
-from ..timeline import VISEME, Timeline
+from ..timeline import MAX_TIMELINE_S, VISEME, Timeline
 from .base import READERS, Reader, ReadOptions
 from ._common import build, decode_text, first_nonblank, parse_number, sniff_text
 
@@ -33,7 +33,11 @@ def read(path: str, data: bytes, options: ReadOptions) -> Timeline:
             raise TimelineError(f"frame number {fields[0]!r} is not a whole number", path=path, line=n)
         if frame < 1:
             raise TimelineError(f"frame number {fields[0]} is below 1 (frames are 1-based)", path=path, line=n)
-        keys.append(((frame - 1) / options.fps, fields[1], n))
+        t = (frame - 1) / options.fps
+        if t > MAX_TIMELINE_S:  # here, not in build(): this key's line holds the frame (the key before ends at it)
+            raise TimelineError(f"frame {fields[0]} is {t:g} s in at {options.fps:g} fps, past the limit of "
+                                f"{MAX_TIMELINE_S:g} s (24 hours)", path=path, line=n)
+        keys.append((t, fields[1], n))
     if not keys:
         raise TimelineError("no switch keys after the header", path=path, line=lineno)
     rows = []

@@ -12,7 +12,7 @@ import re
 from typing import Optional
 
 from ..errors import TimelineError
-from ..timeline import VISEME, Timeline
+from ..timeline import MAX_TIMELINE_S, VISEME, Timeline
 from .base import READERS, Reader, ReadOptions
 from ._common import (build, decode_text, first_nonblank, json_list, json_time, line_of, parse_number, sniff_text)
 
@@ -29,7 +29,10 @@ def read_tsv(path: str, data: bytes, options: ReadOptions) -> Timeline:
         fields = raw.strip().split("\t")
         if len(fields) != 2:
             raise TimelineError(f"expected 'time<TAB>shape', got {raw.strip()!r}", path=path, line=n)
-        cues.append((parse_number(fields[0], path, n, "time"), fields[1].strip(), n))
+        t = parse_number(fields[0], path, n, "time")
+        if t > MAX_TIMELINE_S:  # here, not in build(): this line holds the time (the cue before ends at it)
+            raise TimelineError(f"time {t:g} s is past the limit of {MAX_TIMELINE_S:g} s (24 hours)", path=path, line=n)
+        cues.append((t, fields[1].strip(), n))
     if not cues:
         raise TimelineError("no mouth cues in the file", path=path, line=1)
     rows = [(t, cues[i + 1][0] if i + 1 < len(cues) else t, label, n)

@@ -35,7 +35,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Optional
 
-from ..errors import InputError
+from ..errors import InputError, check_number
 from ..frames import DEFAULT_FPS
 
 STATIC = Path(__file__).resolve().parent / "static"
@@ -53,6 +53,13 @@ DEFAULT_MAX_UPLOAD = 16 << 20
 WS_MAX_MESSAGE = 256 << 10
 #: JPEG quality of live frames: 80 keeps flat drawn colours clean at ~20-40 kB per 512x512 frame.
 DEFAULT_QUALITY = 80
+#: Upper bounds of the numeric options, each far beyond use and below harm: sessions (each
+#: holds a schedule and buffers), a day of idleness, uploads held in memory while read
+#: (2 GB), renderer threads.
+MAX_SESSIONS_LIMIT = 10_000
+MAX_IDLE_TIMEOUT_S = 86400.0
+MAX_UPLOAD_LIMIT = 2 << 30
+MAX_WORKERS = 256
 
 
 @dataclass(frozen=True)
@@ -78,6 +85,20 @@ class ServeConfig:
     workers: Optional[int] = None
     quiet: bool = True
 
+    def __post_init__(self) -> None:
+        # Every number checked here, once, for the CLI and the library alike: a NaN timeout
+        # closed every session after its first message, a NaN upload limit was a traceback.
+        from .protocol import FPS_CHOICES
+
+        check_number(self.max_sessions, "--max-sessions", 1, MAX_SESSIONS_LIMIT, integer=True)
+        check_number(self.idle_timeout, "--idle-timeout", 0, MAX_IDLE_TIMEOUT_S, lo_open=True)
+        check_number(self.max_upload, "--max-upload", 1024, MAX_UPLOAD_LIMIT, integer=True)
+        check_number(self.quality, "--quality", 10, 100, integer=True)
+        if self.workers is not None:
+            check_number(self.workers, "--workers", 1, MAX_WORKERS, integer=True)
+        if self.fps not in FPS_CHOICES:
+            raise InputError(f"--fps must be one of {', '.join(map(str, FPS_CHOICES))}, got {self.fps!r}")
+
 
 class LiveServer:
     """The app of ``lipsync serve`` and what it owns: bank, renderers, threads, temp folder.
@@ -96,8 +117,6 @@ class LiveServer:
         from ..web import Guard
         from .jobs import Jobs
 
-        if config.max_sessions < 1 or config.idle_timeout <= 0 or config.max_upload < 1024:
-            raise InputError("--max-sessions must be >= 1, --idle-timeout > 0 and --max-upload >= 1 kB")
         self.config = config
         self.session = session
         self.bank = Bank.load(config.bank or default_bank_dir())
@@ -124,6 +143,7 @@ class LiveServer:
         from starlette.routing import Mount, Route, WebSocketRoute
         from starlette.staticfiles import StaticFiles
 
+        from ..sequencer import check_fps
         from .jobs import Busy
 
         async def page(request):
@@ -149,7 +169,8 @@ class LiveServer:
             q = request.query_params
             body = await request.body()
             try:
-                fps = float(q["fps"]) if "fps" in q else None
+                # as `lipsync render --fps` checks it (fps=0 once rendered at the default 25)
+                fps = check_fps(q["fps"]) if "fps" in q else None
                 job = self.jobs.submit(body, q.get("name", ""), text=q.get("text"),
                                        timeline_format=q.get("format"), fps=fps)
             except (InputError, ValueError) as exc:

@@ -68,6 +68,10 @@ class Jobs:
             raise InputError(f"upload name {name[:60]!r}: unusable extension")
         if timeline_format is not None:
             READERS.get(timeline_format)  # UnknownNameError lists the valid ones
+        if fps is not None:
+            from ..sequencer import check_fps
+
+            fps = check_fps(fps)
         if text is not None and len(text) > MAX_TEXT_CHARS:
             raise InputError(f"text is over {MAX_TEXT_CHARS} characters")
         if not data:
@@ -90,7 +94,7 @@ class Jobs:
             transcript = folder / "transcript.txt"
             transcript.write_text(text, encoding="utf-8")
             options.text = str(transcript)
-        self._executor.submit(self._run, job, source, options, fps or self.fps)
+        self._executor.submit(self._run, job, source, options, self.fps if fps is None else fps)
         return job
 
     def _run(self, job: Job, source: Path, options, fps: float) -> None:

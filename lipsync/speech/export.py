@@ -21,9 +21,9 @@ from __future__ import annotations
 
 import json
 import os
-import tempfile
 from typing import Optional, Union
 
+from .._files import atomic_write_bytes
 from ..registry import Registry
 
 PathLike = Union[str, "os.PathLike[str]"]
@@ -132,15 +132,4 @@ def write_alignment(alignment, path: PathLike, format: Optional[str] = None) -> 
     if format is None:
         format = ALIGNMENT_FORMATS.name_for_extension(os.path.splitext(name)[1]) or "textgrid"
     text = ALIGNMENT_FORMATS.get(format)(alignment)
-    folder = os.path.dirname(os.path.abspath(name))
-    fd, tmp = tempfile.mkstemp(prefix=".lipsync-", suffix=".tmp", dir=folder)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8", newline="\n") as f:
-            f.write(text)
-        os.replace(tmp, name)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
-        raise
+    atomic_write_bytes(name, lambda fh: fh.write(text.encode("utf-8")))

@@ -132,7 +132,7 @@ def write_png(path: Path, rgb: np.ndarray) -> None:
 
 
 def write_report(path: Path, report: dict) -> None:
-    from ..store import atomic_write_bytes
+    from .._files import atomic_write_bytes
 
     data = (json.dumps(report, indent=2, ensure_ascii=False) + "\n").encode("utf-8")
     atomic_write_bytes(path, lambda fh: fh.write(data))

@@ -120,6 +120,8 @@ class Session:
         Raises :class:`lipsync.errors.InputError` when the port cannot be bound (in use,
         not allowed), naming it.
         """
+        if isinstance(port, bool) or not isinstance(port, int) or not 0 <= port <= 65535:
+            raise InputError(f"--port must be a whole number 0..65535, got {port!r}")
         family = socket.AF_INET6 if ":" in host else socket.AF_INET
         sock = socket.socket(family, socket.SOCK_STREAM)
         sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
@@ -154,6 +156,17 @@ def _header(scope, name: bytes) -> Optional[str]:
     for key, value in scope.get("headers", ()):
         if key == name:
             return value.decode("latin-1")
+    return None
+
+
+def _repeated(scope, names: Tuple[bytes, ...]) -> Optional[str]:
+    """The first of ``names`` that the request carries more than once, if any."""
+    seen = set()
+    for key, _ in scope.get("headers", ()):
+        if key in names:
+            if key in seen:
+                return key.decode("latin-1")
+            seen.add(key)
     return None
 
 
@@ -202,6 +215,12 @@ class Guard:
             self.extra_headers.append((b"content-security-policy", csp.encode()))
 
     def _refusal(self, scope) -> Optional[Tuple[int, str]]:
+        # One Host, one Origin, one token: with two, this guard and whatever reads the
+        # request after it could disagree on which one counts (a valid Origin followed by a
+        # foreign one passed when only the first was read).
+        twice = _repeated(scope, (b"host", b"origin", TOKEN_HEADER.encode()))
+        if twice is not None:
+            return 400, f"refused: the {twice} header is given more than once"
         host = _header(scope, b"host")
         if host is None or host.lower() not in self.session.allowed_hosts:
             return 403, f"refused: Host {host!r} is not this server (DNS rebinding?)"

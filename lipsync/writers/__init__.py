@@ -27,14 +27,13 @@ Examples
 
 from __future__ import annotations
 
-import math
 import os
 from pathlib import Path
 from typing import Iterable, List, Mapping, Optional, Sequence, Tuple, Union
 
 from ..errors import InputError
-from ..timeline import Segment, Timeline
-
+from ..timeline import MAX_TIMELINE_S, Segment, Timeline
+from ..timing import DEFAULT_CURVE
 from .base import DEFAULT_FPS, DEFAULT_TIER, WRITERS, Cue, CueOptions, PathLike, Writer
 
 __all__ = ["DEFAULT_FPS", "DEFAULT_TIER", "WRITERS", "Cue", "CueOptions", "Writer", "cue_track", "format_for",
@@ -67,8 +66,8 @@ def cue_track(cues: Union[Timeline, Sequence[Cue]], *, rest: str,
         # Timeline checks order, overlap and finiteness once for both kinds of input.
         Timeline(tuple(Segment(a, b, v) for a, b, v in rows), kind="viseme")
         total = (rows[-1][1] if rows else 0.0) if duration is None else float(duration)
-    if not math.isfinite(total) or total < 0:
-        raise InputError(f"cue track duration {total!r} is not a finite, non-negative number")
+    if not 0 <= total <= MAX_TIMELINE_S:  # NaN and infinities fail too
+        raise InputError(f"cue track duration {total!r} is not a number of seconds within 0..{MAX_TIMELINE_S:g}")
     out: List[Cue] = []
     t = 0.0
     for start, end, label in rows:
@@ -104,7 +103,9 @@ def format_for(path: PathLike) -> str:
 def write_cues(cues: Union[Timeline, Sequence[Cue]], path: PathLike, format: Optional[str] = None, *,
                rest: str = "X", fps: float = DEFAULT_FPS, tier: str = DEFAULT_TIER,
                sound_file: Optional[str] = None, names: Optional[Mapping[str, str]] = None,
-               closures: Iterable[str] = (), duration: Optional[float] = None) -> str:
+               closures: Iterable[str] = (), duration: Optional[float] = None, timing=DEFAULT_CURVE,
+               timeline: Optional[Timeline] = None, classes: Optional[Mapping[str, str]] = None,
+               atlas=None) -> str:
     """Write a viseme track as mouth cues; returns the format name used.
 
     Parameters
@@ -129,6 +130,18 @@ def write_cues(cues: Union[Timeline, Sequence[Cue]], path: PathLike, format: Opt
         Visemes shown however short (closed lips); Moho gives them a key first.
     duration : float, optional
         End of the track (default: the timeline's duration).
+    timing : str or DominanceParams
+        How the mouth moves, as :func:`lipsync.sequencer.sequence` takes it (the atlas
+        frames are the sequencer's frames).
+    timeline : Timeline, optional
+        The viseme timeline the cues were planned from (the atlas frames sequence it, as
+        ``render`` does; default: the cues).
+    classes : mapping, optional
+        Viseme -> class, for the dominance timing model
+        (:func:`lipsync.coarticulation.viseme_classes`).
+    atlas : Atlas, optional
+        For ``atlas``: the sprite atlas (:func:`lipsync.atlas.load_atlas`) whose cells the
+        frames name.
 
     Returns
     -------
@@ -153,7 +166,7 @@ def write_cues(cues: Union[Timeline, Sequence[Cue]], path: PathLike, format: Opt
     3 AI
     5 rest
     """
-    from ..store import atomic_write_bytes
+    from .._files import atomic_write_bytes
 
     name = format_for(path) if format is None else format
     writer = WRITERS.get(name)
@@ -161,7 +174,9 @@ def write_cues(cues: Union[Timeline, Sequence[Cue]], path: PathLike, format: Opt
         raise InputError(f"frame rate must be a positive number, not {fps!r}")
     track, total = cue_track(cues, rest=rest, duration=duration)
     options = CueOptions(duration=total, rest=rest, fps=float(fps), tier=tier, sound_file=sound_file,
-                         names=dict(names or {}), closures=frozenset(closures))
+                         names=dict(names or {}), closures=frozenset(closures), timing=timing, timeline=timeline,
+                         classes=dict(classes) if classes is not None else None, atlas=atlas,
+                         output=os.fspath(path))
     text = writer.render(track, options)
     data = text.encode("utf-8")
     atomic_write_bytes(Path(os.fspath(path)), lambda fh: fh.write(data))
@@ -169,4 +184,4 @@ def write_cues(cues: Union[Timeline, Sequence[Cue]], path: PathLike, format: Opt
 
 
 # Each writer module registers itself in WRITERS (lipsync.writers.base).
-from . import rhubarb, moho, textgrid, audacity  # noqa: E402,F401  (registration order = --format choices)
+from . import rhubarb, moho, textgrid, audacity, atlas  # noqa: E402,F401  (registration order = --format choices)

@@ -11,6 +11,7 @@ from dataclasses import dataclass, field
 from typing import Callable, FrozenSet, Mapping, Optional, Sequence, Tuple, Union
 
 from ..registry import Registry
+from ..timing import DEFAULT_CURVE
 
 PathLike = Union[str, "os.PathLike[str]"]
 
@@ -44,6 +45,18 @@ class CueOptions:
     closures : frozenset
         Visemes that must be shown however short (the map's closures): Moho keys them first
         when cues share a frame.
+    timing : str or DominanceParams
+        How the mouth moves (formats holding frames, the atlas frames): what
+        :func:`lipsync.sequencer.sequence` takes as ``timing``.
+    timeline : Timeline, optional
+        The viseme timeline the cues were planned from (formats holding frames sequence it
+        as ``render`` does; default: the cues themselves).
+    classes : mapping, optional
+        Viseme -> articulatory class, for the dominance timing model.
+    atlas : Atlas, optional
+        The sprite atlas whose cells the atlas frames name (:mod:`lipsync.atlas`).
+    output : str, optional
+        The file being written (formats that name other files relative to it).
     """
 
     duration: float
@@ -53,6 +66,11 @@ class CueOptions:
     sound_file: Optional[str] = None
     names: Mapping[str, str] = field(default_factory=dict)
     closures: FrozenSet[str] = frozenset()
+    timing: object = DEFAULT_CURVE
+    timeline: Optional[object] = None
+    classes: Optional[Mapping[str, str]] = None
+    atlas: Optional[object] = None
+    output: Optional[str] = None
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,166 @@
+"""Outputs written under a temporary name beside ``OUT`` and renamed into place when complete.
+
+Every file lipsync writes goes through here or through an encoder (lipsync.encode), and
+both name their temporary output ``.OUT.partial-PID...`` (hidden, beside ``OUT``, carrying
+the writer's process id). A failure or Ctrl-C removes it; only a killed process
+(SIGKILL, an OOM kill, a power cut) can leave one behind, and then the next write of the
+same ``OUT`` removes it: :func:`remove_stale_partials` deletes the partials of ``OUT``
+whose process no longer exists (never those of a running writer, and nothing else in the
+folder).
+
+Errors name ``OUT``, not the temporary file the OS complained about.
+
+Examples
+--------
+>>> import os, tempfile
+>>> d = tempfile.mkdtemp()
+>>> atomic_write_bytes(os.path.join(d, "a.txt"), lambda fh: fh.write(b"hi"))
+>>> os.listdir(d), open(os.path.join(d, "a.txt")).read()
+(['a.txt'], 'hi')
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import shutil
+from pathlib import Path
+from typing import Callable, List, Tuple, Union
+
+PathLike = Union[str, "os.PathLike[str]"]
+
+PARTIAL = ".partial-"
+
+
+def pid_alive(pid: int) -> bool:
+    """Whether a process with this id exists (one of another user counts as alive).
+
+    Examples
+    --------
+    >>> pid_alive(os.getpid()), pid_alive(2**22 + 1)   # Linux pids stop at 2**22
+    (True, False)
+    """
+    if pid <= 0:
+        return False
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    except (OverflowError, ValueError):  # not a pid this system can have
+        return False
+    return True
+
+
+def partial_name(out: PathLike, suffix: str = "") -> str:
+    """The temporary name of ``out`` for this process: ``.NAME.partial-PID`` plus ``suffix``.
+
+    Examples
+    --------
+    >>> partial_name("/x/clip.mp4", ".mp4") == f".clip.mp4.partial-{os.getpid()}.mp4"
+    True
+    """
+    return f".{os.path.basename(os.fspath(out))}{PARTIAL}{os.getpid()}{suffix}"
+
+
+def remove_stale_partials(out: PathLike, tags: Tuple[str, ...] = ("partial",)) -> List[Path]:
+    """Delete ``.NAME.partial-PID*`` files and folders beside ``out`` whose process is gone.
+
+    ``tags``: the words between the name and the pid (an encoder's two-pass video file is
+    ``.NAME.video-PID.mp4``).
+
+    Returns what was removed. Partials of live processes (another render of the same
+    ``OUT`` running now) and every other file are left alone; errors are ignored (this is
+    cleanup, and must never stop the write that called it).
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> d = tempfile.mkdtemp()
+    >>> for pid in (os.getpid(), 2**22 + 12345):  # this process, and one that cannot exist
+    ...     _ = open(os.path.join(d, f".a.mp4.partial-{pid}.mp4"), "w").write("x")
+    >>> [p.name.split("-")[1] for p in remove_stale_partials(os.path.join(d, "a.mp4"))]
+    ['4206649.mp4']
+    >>> len(os.listdir(d))
+    1
+    """
+    out = Path(os.fspath(out))
+    words = "|".join(re.escape(t) for t in tags)
+    pattern = re.compile(re.escape(f".{out.name}.") + f"(?:{words})-" + r"(\d+)(?:[-.].*)?$", re.S)
+    removed: List[Path] = []
+    try:
+        entries = list(out.parent.iterdir())
+    except OSError:
+        return removed
+    for p in entries:
+        m = pattern.match(p.name)
+        if m is None or pid_alive(int(m.group(1))):
+            continue
+        try:
+            if p.is_dir() and not p.is_symlink():
+                shutil.rmtree(p)
+            else:
+                p.unlink()
+            removed.append(p)
+        except OSError:
+            pass
+    return removed
+
+
+def remove_dead_partials_in(folder: PathLike) -> List[Path]:
+    """Every ``.NAME.partial-PID*`` in ``folder`` whose process is gone, removed (for folders
+    that are wholly ours, such as a flow store's)."""
+    pattern = re.compile(r"^\..+" + re.escape(PARTIAL) + r"(\d+)(?:[-.].*)?$", re.S)
+    removed: List[Path] = []
+    try:
+        entries = list(Path(os.fspath(folder)).iterdir())
+    except OSError:
+        return removed
+    for p in entries:
+        m = pattern.match(p.name)
+        if m is not None and not pid_alive(int(m.group(1))):
+            try:
+                shutil.rmtree(p) if p.is_dir() and not p.is_symlink() else p.unlink()
+                removed.append(p)
+            except OSError:
+                pass
+    return removed
+
+
+def _naming(exc: OSError, path: Path) -> OSError:
+    """``exc`` again, its message naming ``path`` (the user's OUT, not our temporary file)."""
+    return type(exc)(exc.errno, f"cannot write {path}: {exc.strerror or exc}")
+
+
+def atomic_write_bytes(path: PathLike, data_writer: Callable) -> None:
+    """Write a file via a temporary file in its folder, fsync, then rename into place.
+
+    ``data_writer(fh)`` writes the content to the open binary file. A missing folder is
+    created (as every command's ``-o`` does); stale partials of ``path`` left by killed
+    processes are removed first. An ``OSError`` names ``path``, with its errno kept
+    (``ENOSPC``: the disk is full).
+    """
+    path = Path(os.fspath(path))
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise _naming(exc, path) from None
+    remove_stale_partials(path)
+    tmp = path.parent / (partial_name(path) + "-" + os.urandom(4).hex())
+    try:
+        with open(tmp, "wb") as fh:
+            data_writer(fh)
+            fh.flush()
+            os.fsync(fh.fileno())
+        if path.is_dir() and not path.is_symlink():
+            raise IsADirectoryError(21, "Is a directory")  # os.replace's own message would name tmp
+        os.replace(tmp, path)
+    except BaseException as exc:
+        try:
+            tmp.unlink()
+        except OSError:
+            pass
+        if isinstance(exc, OSError):
+            raise _naming(exc, path) from None
+        raise
