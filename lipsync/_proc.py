@@ -44,7 +44,7 @@ def die_with_parent(parent_pid: int, sig: int = signal.SIGKILL) -> None:
     >>> import subprocess
     >>> code = "import os; from lipsync._proc import die_with_parent; die_with_parent(os.getppid()); print('ok')"
     >>> subprocess.run([sys.executable, "-c", code], capture_output=True, text=True).stdout
-    'ok\n'
+    'ok\\n'
     """
     if sys.platform.startswith("linux"):
         try:

@@ -39,6 +39,7 @@ OWN = {
     "lipsync/_configs/phonesets": "the phone set written for lipsync",
     "lipsync/editor/static": "the editor page: our own HTML, JS and CSS, no library vendored",
     "lipsync/server/static": "the live player page: our own HTML, JS and CSS, no library vendored",
+    "lipsync/atlas/static": "the atlas player: our own HTML and JS, no library vendored",
 }
 
 

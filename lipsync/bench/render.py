@@ -76,7 +76,7 @@ def _random_symmetric_lines(shape, n, rng):
 def bench_field(rows: List[dict], quick: bool) -> None:
     from ..bank import WarpParams
     from ..flows import flow_field
-    from ..warp import beier_neely_map
+    from ..warp import beier_neely_displacement, beier_neely_map
 
     rng = np.random.default_rng(0)
     for shape in ((512, 512), (720, 1280)):
@@ -87,6 +87,9 @@ def bench_field(rows: List[dict], quick: bool) -> None:
         src_sym[len(dst) // 2 : 2 * (len(dst) // 2), :, 1] += 3.0
         rep = 3 if quick else 7
         ms = median_ms(lambda: beier_neely_map(shape, dst_lines=dst, src_lines=src), rep)
+        # the compiled field's portable path and numba's copy (installs without the extension)
+        plain_ms = median_ms(lambda: beier_neely_displacement(shape, dst_lines=dst, src_lines=src, kernel="plain"), rep)
+        numba_ms = median_ms(lambda: beier_neely_displacement(shape, dst_lines=dst, src_lines=src, kernel="numba"), rep)
         mem = peak_mb(lambda: beier_neely_map(shape, dst_lines=dst, src_lines=src))
         naive_ms = median_ms(lambda: naive_beier_neely_map(shape, dst, src), 1 if quick else 3, warmup=0)
         naive_mem = peak_mb(lambda: naive_beier_neely_map(shape, dst, src))
@@ -97,6 +100,7 @@ def bench_field(rows: List[dict], quick: bool) -> None:
         rows.append({
             "figure": "beier_neely_field", "size": f"{shape[1]}x{shape[0]}", "lines": 30,
             "ms": round(ms, 1), "ns_per_pixel_line": round(ms * 1e6 / px / 30, 2), "peak_mb": round(mem, 1),
+            "plain_path_ms": round(plain_ms, 1), "numba_ms": round(numba_ms, 1),
             "naive_ms": round(naive_ms, 1), "naive_peak_mb": round(naive_mem, 1),
             "speedup_vs_naive": round(naive_ms / ms, 1), "memory_ratio": round(mem / naive_mem, 4),
             "symmetric_full_ms": round(full_ms, 1), "symmetric_half_ms": round(half_ms, 1),
