@@ -30,6 +30,7 @@ from .errors import InputError
 from .phonemes import DEFAULT_MAP, PhonemeMap, bank_viseme_timeline, load_map
 from .readers import read_timeline
 from .render import Renderer
+from .frames import DEFAULT_FPS
 from .sequencer import FrameSpec, check_fps, sequence
 from .store import FlowStore
 from .timeline import Timeline
@@ -69,7 +70,7 @@ class Animator:
         The mapped viseme timeline.
     """
 
-    def __init__(self, bank: Union[Bank, str, "os.PathLike[str]"], timeline, fps: float = 25, *,
+    def __init__(self, bank: Union[Bank, str, "os.PathLike[str]"], timeline, fps: float = DEFAULT_FPS, *,
                  map: Union[str, "os.PathLike[str]", PhonemeMap, None] = None, method: str = "flow",
                  timing=None, store: Optional[FlowStore] = None, timeline_options=None):
         self.bank = bank if isinstance(bank, Bank) else Bank.load(bank)
@@ -91,7 +92,7 @@ class Animator:
 
     @classmethod
     def from_audio(cls, bank: Union[Bank, str, "os.PathLike[str]"], audio, text: Optional[str] = None,
-                   fps: float = 25, **kwargs) -> "Animator":
+                   fps: float = DEFAULT_FPS, **kwargs) -> "Animator":
         """An Animator for a speech recording: aligned with pocketsphinx, then as usual.
 
         Parameters

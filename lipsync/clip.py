@@ -26,12 +26,10 @@ import time
 from dataclasses import dataclass
 from typing import Optional, Union
 
+from .frames import DEFAULT_FPS  # noqa: F401  (the one default frame rate; clip.DEFAULT_FPS kept)
 
 PathLike = Union[str, "os.PathLike[str]"]
 
-#: 25 fps is PAL video's rate and enough for lips (Rhubarb needs >= 24 for hard cuts;
-#: morphs look smooth well below that, so lower rates are allowed).
-DEFAULT_FPS = 25.0
 #: crf 18 is visually lossless for drawn faces.
 DEFAULT_CRF = 18
 #: "talking-head" (lipsync.encode.X264_PRESETS: ultrafast's analysis plus CABAC, B-frames

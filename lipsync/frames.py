@@ -27,6 +27,12 @@ from .timeline import MAX_TIMELINE_S, VISEME, Segment, Timeline
 MAX_FRAMES = 1_000_000
 
 FPS_RANGE = (1.0, 120.0)
+#: The output frame rate when none is given, one value for every command and API that makes
+#: frames (``lipsync render``, ``timeline --frames``, ``serve``, ``batch``, the animators), so
+#: the schedule ``timeline --frames`` prints is the one ``render`` renders. 25 fps is PAL
+#: video's rate and enough for lips (Rhubarb needs >= 24 for hard cuts; morphs look smooth
+#: well below that, so lower rates are allowed).
+DEFAULT_FPS = 25.0
 
 
 @dataclass(frozen=True)

@@ -122,8 +122,8 @@ def test_mfa_corpus_with_transcript(with_text, mfa_ref):
           f"{mae * 1000:.1f} ms (median signed {bias * 1000:+.1f} ms), {frames:.1%} of frames same shape")
     assert not with_text.recognised and with_text.confidence > 0.8
     assert matched >= 0.90
-    assert mae <= 0.020 + 0.001  # goal 20 ms; measured 17.7 ms
-    assert frames >= 0.85 - 0.005  # goal 85%; measured 87.9%
+    assert mae <= 0.020 + 0.001  # goal 20 ms; measured 15.9 ms (17.7 before issue 20)
+    assert frames >= 0.85 - 0.005  # goal 85%; measured 88.4%
     # the whole audio is covered and the words are the transcript's
     assert with_text.duration == pytest.approx(mfa_ref.duration, abs=1e-3)
     assert with_text.words.labels()[:5] == ["this", "is", "the", "acoustic", "corpus"]
@@ -158,3 +158,130 @@ def test_espeak_samples_phone_times(name):
     assert al.words.labels() == [w.lower() for w in words.labels()]
     for ours, theirs in zip(al.words, words):
         assert abs(ours.start - theirs.start) < 0.05 and abs(ours.end - theirs.end) < 0.06
+
+
+# --- GRID (issue 20): real sentences of one speaker with GRID's own word alignments ----------
+
+GRID_DIRS = [ROOT / "tests" / "data" / "grid-s1", ROOT / "tests" / "data" / "grid-s1-audio"]
+GRID_SILENCE = {"sil", "sp"}
+
+
+def grid_rows(path):
+    """(start s, end s, label) of a GRID .align file: ticks of 1/25000 s, CRLF lines."""
+    rows = []
+    for line in path.read_bytes().decode("ascii").split("\r\n"):
+        if line.strip():
+            start, end, label = line.split()
+            rows.append((int(start) / 25000, int(end) / 25000, label))
+    return rows
+
+
+def grid_sentences():
+    out = []
+    for folder in GRID_DIRS:
+        for p in sorted(folder.glob("*.align")):
+            audio = p.with_suffix(".mpg") if p.with_suffix(".mpg").is_file() else p.with_suffix(".flac")
+            rows = grid_rows(p)
+            out.append((p.stem, audio, rows, [w for _, _, w in rows if w not in GRID_SILENCE]))
+    return out
+
+
+def align_recording(audio, text):
+    from lipsync.speech.align import AlignmentWarning
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        al = align(audio, text)
+    return al, [w for w in caught if issubclass(w.category, AlignmentWarning)]
+
+
+@pytest.fixture(scope="module")
+def grid_own():
+    return [(name, rows, words, *align_recording(audio, " ".join(words)))
+            for name, audio, rows, words in grid_sentences()]
+
+
+def test_grid_sentences_come_back_as_their_transcripts(grid_own):
+    # seven sentences, among them the five that came back as other words before issue 20
+    # (lwae8n, bram2n, lgwg3s, lray6p, lwwf8p: "been invited him to now" for "bin red at m
+    # two now"); all 40 are in the bench (python -m lipsync.bench --only align-grid)
+    names = {name for name, *_ in grid_own}
+    assert {"lwae8n", "bram2n", "lgwg3s", "lray6p", "lwwf8p"} <= names and len(names) == 7
+    for name, rows, words, al, warned in grid_own:
+        assert al.words.labels() == words, name
+        assert not al.recognised and not al.skipped and not warned, name
+        assert al.confidence >= 0.6, name  # measured 0.87 to 0.99
+        # the phones are the words' (letters by their names: "m" = EH M, "y" = W AY)
+        if "m" in words:
+            i = words.index("m")
+            inside = [p.label for p in al.phones if al.words[i].start <= p.start < al.words[i].end]
+            assert [re.sub(r"\d", "", p) for p in inside] == ["EH", "M"]
+
+
+def word_boundary_errors(words, rows):
+    """(ours - GRID's, beside a pause?) for the start and end of each of GRID's words."""
+    out = []
+    ref = [(i, r) for i, r in enumerate(rows) if r[2] not in GRID_SILENCE]
+    for seg, (i, (start, end, label)) in zip(words, ref):
+        assert seg.label == label
+        pause_before = i == 0 or rows[i - 1][2] in GRID_SILENCE
+        pause_after = i == len(rows) - 1 or rows[i + 1][2] in GRID_SILENCE
+        out += [(seg.start - start, pause_before), (seg.end - end, pause_after)]
+    return out
+
+
+def test_grid_word_boundaries(grid_own):
+    # Compared: the start and end of every word. Where GRID has a word on both sides the two
+    # aligners face the same change of sound; where it has sil/sp beside the word each one's
+    # silence model decides (GRID starts "lay" and "set" 70-360 ms before any voicing or
+    # frication, over breaths), so those are looser.
+    errors = [e for _, rows, _, al, _ in grid_own for e in word_boundary_errors(al.words, rows)]
+    between = np.abs([e for e, pause in errors if not pause])
+    at_pause = np.abs([e for e, pause in errors if pause])
+    print(f"\nGRID, {len(grid_own)} sentences: between words mean {between.mean() * 1000:.1f} ms, 90th percentile "
+          f"{np.percentile(between, 90) * 1000:.1f} ms (n={len(between)}); at pauses mean "
+          f"{at_pause.mean() * 1000:.1f} ms (n={len(at_pause)})")
+    # Measured on these seven: 20.6 and 50 ms (on all 40 in the bench: 18.5 and 40 ms, the
+    # issue's goal of 20 and 40); at pauses 42.5 ms. Before issue 20 five of these seven
+    # did not align at all.
+    assert between.mean() <= 0.022
+    assert np.percentile(between, 90) <= 0.050 + 1e-9
+    assert at_pause.mean() <= 0.050
+
+
+def test_grid_another_sentences_transcript_is_reported_with_a_low_confidence(grid_own):
+    from lipsync.speech.align import LOW_CONFIDENCE
+
+    sentences = grid_sentences()
+    for i, (name, audio, _, words) in enumerate(sentences):
+        other = sentences[(i + 1) % len(sentences)][3]  # the next sentence's transcript
+        al, warned = align_recording(audio, " ".join(other))
+        assert warned and al.confidence < LOW_CONFIDENCE, (name, other, al.confidence)
+        assert f"confidence {al.confidence:.2f}" in str(warned[-1].message)
+
+
+def test_grid_words_stay_when_the_phone_pass_fails(monkeypatch):
+    # the words a transcript's grammar found are never given up: had the phone pass failed
+    # (it did on five GRID sentences before issue 20), the words keep the grammar's times
+    # and share them among their phones
+    import lipsync.speech.align as A
+
+    real = A._aligner()
+
+    class NoPhonePass:
+        def __getattr__(self, name):
+            return getattr(real, name)
+
+        def set_alignment(self, *args):
+            raise RuntimeError("Failed to set up sub-word alignment")
+
+    monkeypatch.setattr(A, "_aligner", lambda: NoPhonePass())
+    name, audio, rows, words = next(s for s in grid_sentences() if s[0] == "bram2n")
+    al, warned = align_recording(audio, " ".join(words))
+    assert al.words.labels() == words and not al.recognised and not warned
+    ref = [r for r in rows if r[2] not in GRID_SILENCE]
+    assert max(abs(s.start - r[0]) for s, r in zip(al.words, ref)) < 0.08
+    # "bin" = B IH N within the word's time, in order
+    first = [p for p in al.phones if al.words[0].start <= p.start < al.words[0].end]
+    assert [re.sub(r"\d", "", p.label) for p in first] == ["B", "IH", "N"]
+    assert first[0].start == al.words[0].start and first[-1].end == al.words[0].end

@@ -94,7 +94,7 @@ def test_align_cli_json(tmp_path):
     assert r.returncode == 0, r.stderr
     doc = json.loads(out.read_text())
     assert [w["word"] for w in doc["words"]] == HELLO_WORDS
-    assert doc["missing_words"] == ["lipsync"] and doc["recognised"] is False
+    assert doc["missing_words"] == ["lipsync"] and doc["recognised"] is False and doc["skipped_words"] == []
     assert all(a["end"] <= b["start"] + 1e-9 for a, b in zip(doc["phones"], doc["phones"][1:]))
 
 
@@ -139,6 +139,9 @@ def test_a_mostly_right_transcript_keeps_its_words():
     assert words[:8] == ["five", "blue", "balloons", "floated", "over", "the", "warm", "pool"]
     assert "telephone" not in words and len(words) >= 11
     assert 0.5 < al.confidence < 1.0 and f"confidence {al.confidence:.2f}" in str(record[-1].message)
+    # the words left out are named, in the warning and in the alignment
+    assert "telephone" in al.skipped and len(al.skipped) == 14 - len(words)
+    assert f"({', '.join(al.skipped)})" in str(record[-1].message)
 
 
 def test_out_of_dictionary_words_are_listed_once_and_pronounced(hello_alignment):

@@ -389,3 +389,19 @@ def test_dominance_frames_follow_the_banks_timing(tmp_path, dominant_bank):
     assert main(["cues", str(BALLOONS), "--format", "atlas", "--atlas", atlas_json, "--fps", "25", "-o", str(b),
                  "-q", "--bank", str(dominant_bank)]) == 0
     assert json.loads(a.read_text())["frames"] == json.loads(b.read_text())["frames"]
+
+
+def test_frames_without_fps_are_the_frames_render_renders(tmp_path, hello, toon):
+    # one default frame rate for every command (issue 20): atlas frames are what a player
+    # shows, so without --fps they are render's 25 a second (Moho keys keep Moho's 24)
+    from lipsync.frames import DEFAULT_FPS
+
+    out = tmp_path / "frames.json"
+    assert main(["cues", str(HELLO), "--format", "atlas", "--atlas", str(hello / "mouth.json"),
+                 "-o", str(out), "-q"]) == 0
+    doc = json.loads(out.read_text())
+    assert doc["fps"] == DEFAULT_FPS == 25 and doc["count"] == len(Animator(toon, HELLO).specs)
+    dat, dat24 = tmp_path / "hello.dat", tmp_path / "hello24.dat"
+    assert main(["cues", str(HELLO), "-o", str(dat), "-q"]) == 0
+    assert main(["cues", str(HELLO), "-o", str(dat24), "--fps", "24", "-q"]) == 0
+    assert dat.read_text() == dat24.read_text()

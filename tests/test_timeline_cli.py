@@ -123,3 +123,17 @@ def test_load_viseme_timeline_checks_map_against_bank():
         load_viseme_timeline(_args(MFA), rest="X", viseme_names=list("ABCDEFGX"))
     tl, _ = load_viseme_timeline(_args(MFA), rest="X")  # no bank: no check
     assert len(tl) >= len(read_timeline(MFA))
+
+
+def test_frames_default_rate_is_the_rate_render_renders(capsys, tmp_path):
+    # one default frame rate for every command (issue 20: timeline --frames printed a 24 fps
+    # schedule while render made 25 fps video): the schedule printed is the video rendered
+    from lipsync.encode import probe
+
+    code, out, _ = run(capsys, MFA, "--frames")
+    assert code == 0
+    frames = [r for r in _body(out) if len(r) == 5]
+    video = tmp_path / "michael.mp4"
+    assert main(["render", str(MFA), "-o", str(video), "--method", "dissolve", "-q"]) == 0
+    info = probe(video)
+    assert info["n_frames"] == len(frames) and f"frames at {info['fps']:g} fps" in out

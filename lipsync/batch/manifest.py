@@ -23,6 +23,7 @@ from pathlib import Path, PurePosixPath
 from typing import Dict, List, Optional, Tuple, Union
 
 from ..errors import InputError
+from ..frames import DEFAULT_FPS
 
 PathLike = Union[str, "os.PathLike[str]"]
 
@@ -33,7 +34,7 @@ FIELDS = {
     "bank": "viseme bank folder (default: the shipped toon)",
     "text": "transcript for audio input: the text itself, or a file holding it",
     "audio": "speech to mux into the video",
-    "fps": "frames per second (default: 25)",
+    "fps": f"frames per second (default: {DEFAULT_FPS:g})",
     "map": "phoneme map: a shipped name or a YAML file",
     "timing": "timing name: a transition curve or dominance (default: the bank's, else sqrt-fast-middle)",
     "method": "in-between method name",
@@ -101,7 +102,7 @@ class ClipJob:
     text: Optional[str] = None
     text_file: Optional[Path] = None
     audio: Optional[Path] = None
-    fps: float = 25.0
+    fps: float = DEFAULT_FPS
     map: str = ""
     map_file: Optional[Path] = None
     timing: str = ""
@@ -318,7 +319,7 @@ def read_manifest(path: PathLike, outdir: Optional[PathLike] = None) -> List[Cli
             text_file, text_value = local(text_value), None
         audio_path = existing_file("audio")
 
-        fps = 25.0
+        fps = DEFAULT_FPS
         if field("fps") is not None:
             try:
                 fps = check_fps(field("fps"))

@@ -3,7 +3,8 @@
 On the MFA corpus recording (``ctx.mfa/acoustic_corpus.wav``, 26.7 s of real speech):
 
 1. speed as a multiple of real time, with the .lab transcript and without (recognition
-   first), wall clock and CPU (this process and its workers), median of repeats;
+   first), wall clock and CPU (this process and its workers), median of repeats; with the
+   transcript also the share of that CPU time the fit check's phone loop takes;
 2. accuracy against MFA's own ``phones`` tier: share of MFA's phones matched (difflib's
    matching blocks of the labels), mean absolute boundary error of matched phones, and the share of
    10 ms frames showing the same Rhubarb mouth shape (both mapped with english-to-rhubarb);
@@ -11,6 +12,21 @@ On the MFA corpus recording (``ctx.mfa/acoustic_corpus.wav``, 26.7 s of real spe
    boundary error: pocketsphinx's bias);
 4. linear growth: the recording repeated 2 and 6 times (53 s, 160 s) aligned with its
    transcript: CPU seconds per second of audio of the longer against the shorter.
+
+On the GRID sentences of speaker s1 (``../shared/grid-s1``, 40 real 3 s sentences with
+GRID's own word alignments; without it, the few copied into tests/data), rows of figure
+``align-grid`` (issue 20):
+
+5. each sentence with its own transcript: sentences whose words came back as the
+   transcript (no warning), lowest confidence, speed; word boundary error against GRID's
+   ``.align`` (every start and end of a non-silence word, 10 ms frames against GRID's
+   times) split by where the boundary is: between two words, or at a pause (a GRID
+   ``sil``/``sp`` beside it: there the two aligners' silence models decide, with breaths,
+   lip noise and the silent closure of a stop on either side; see :func:`grid_boundaries`);
+6. each sentence with other sentences' transcripts (the 7th, 13th and 20th next in name
+   order: 3 each), with its letter left out, and with a word added: how many are reported
+   (an AlignmentWarning), how many of those with a confidence below 0.5, and the
+   confidences.
 """
 
 from __future__ import annotations
@@ -117,6 +133,12 @@ def _align(ctx: Context, rows: List[dict]) -> None:
                          "phones_matched_%": round(100 * matched, 1), "mean_abs_boundary_ms": round(1000 * mae, 1),
                          "median_signed_ms": round(1000 * bias, 1),
                          "same_mouth_shape_frames_%": round(100 * frame_agreement(al.phones, ref, ref.duration), 1)})
+            if transcript is not None:
+                # the share of that CPU time spent on the fit check's free phone loop (issue 20)
+                from ..speech.align import _dither, _phone_loop_scores
+
+                _, _, loop_cpu = _timed(lambda: _phone_loop_scores(_dither(pcm)), repeat)
+                rows[-1]["fit_check_cpu_%"] = round(100 * loop_cpu / cpu)
         samples = Path(__file__).resolve().parents[2] / "samples"
         for name in ("hello", "balloons"):
             if not (samples / f"{name}.wav").is_file():
@@ -147,3 +169,126 @@ def _align(ctx: Context, rows: List[dict]) -> None:
                              "cpu_per_audio_s_vs_x2": round(per_s[copies] / per_s[2], 2),
                              "same_mouth_shape_frames_%": round(100 * frame_agreement(al.phones, long_ref,
                                                                                       copies * seconds), 1)})
+
+
+# --- GRID (issue 20) ------------------------------------------------------------------------
+
+#: GRID's time unit (1/25000 s) and its silence labels.
+_GRID_TICKS = 25000
+_GRID_SILENCE = ("sil", "sp")
+
+
+def _grid_dir() -> List[Path]:
+    """Folders holding GRID sentences (``NAME.align`` beside ``NAME.mpg``/``.flac``): the
+    shared 40 when found ($LIPSYNC_GRID, or ``shared/grid-s1`` beside the checkout or a
+    level up), else the tests' copies."""
+    root = Path(__file__).resolve().parents[2]
+    candidates = [Path(os.environ["LIPSYNC_GRID"])] if os.environ.get("LIPSYNC_GRID") else []
+    candidates += [up / "shared" / "grid-s1" for up in (root.parent, root.parent.parent)]
+    for c in candidates:
+        if len(list(c.glob("*.align"))) >= 20:
+            return [c]
+    return [root / "tests" / "data" / "grid-s1", root / "tests" / "data" / "grid-s1-audio"]
+
+
+def read_grid_align(path) -> List[tuple]:
+    """(start s, end s, label) rows of a GRID ``.align`` file (``sil``/``sp`` kept)."""
+    rows = []
+    for line in Path(path).read_text().splitlines():
+        f = line.split()
+        if len(f) == 3:
+            rows.append((int(f[0]) / _GRID_TICKS, int(f[1]) / _GRID_TICKS, f[2]))
+    return rows
+
+
+def grid_boundaries(words, rows) -> List[tuple]:
+    """(our time - GRID's time in s, "between" or "pause") for every start and end of GRID's words.
+
+    ``words`` is our words timeline (its labels must be GRID's words); a boundary is
+    "between" when GRID has the neighbouring word right there (no ``sil``/``sp`` row beside
+    it), else "pause". GRID's word times come from an HMM aligner like ours; where a word
+    meets silence they say as much about each aligner's silence model as about the word.
+    """
+    ref = [(i, r) for i, r in enumerate(rows) if r[2] not in _GRID_SILENCE]
+    out = []
+    for seg, (i, (start, end, _)) in zip(words, ref):
+        before = "between" if i > 0 and rows[i - 1][2] not in _GRID_SILENCE else "pause"
+        after = "between" if i + 1 < len(rows) and rows[i + 1][2] not in _GRID_SILENCE else "pause"
+        out += [(seg.start - start, before), (seg.end - end, after)]
+    return out
+
+
+def _grid_align(pcm, text):
+    """(alignment, AlignmentWarnings) of one sentence."""
+    from ..speech.align import AlignmentWarning, align_samples
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        al = align_samples(pcm, text, quiet=True)
+    return al, [w for w in caught if issubclass(w.category, AlignmentWarning)]
+
+
+@FIGURES.decorator("align-grid")
+def _align_grid(ctx: Context, rows: List[dict]) -> None:
+    from ..speech.audio import load_audio
+
+    sentences = []
+    for folder in _grid_dir():
+        for align_path in sorted(folder.glob("*.align")):
+            audio = next((align_path.with_suffix(e) for e in (".mpg", ".flac", ".wav")
+                          if align_path.with_suffix(e).is_file()), None)
+            if audio is not None:
+                ref = read_grid_align(align_path)
+                words = [w for _, _, w in ref if w not in _GRID_SILENCE]
+                sentences.append((align_path.stem, load_audio(audio), ref, words))
+    if not sentences:
+        return
+    n = len(sentences)
+    _grid_align(sentences[0][1], " ".join(sentences[0][3]))  # model loading is not alignment speed
+    # 5. own transcripts
+    same, confidences, errors, audio_s = 0, [], [], 0.0
+    cpu0, wall0 = _cpu(), time.perf_counter()
+    results = [_grid_align(pcm, " ".join(words)) for _, pcm, _, words in sentences]
+    cpu, wall = _cpu() - cpu0, time.perf_counter() - wall0
+    for (name, pcm, ref, words), (al, warned) in zip(sentences, results):
+        audio_s += len(pcm) / 16000
+        confidences.append(al.confidence)
+        if al.words.labels() == words and not al.recognised and not warned:
+            same += 1
+            errors += grid_boundaries(al.words, ref)
+    row = {"figure": "align-grid", "case": f"GRID s1, {n} sentences, own transcripts",
+           "transcript_words_back": f"{same}/{n}", "lowest_confidence": round(min(confidences), 2),
+           "x_real_time_wall": round(audio_s / wall, 1), "x_real_time_cpu": round(audio_s / cpu, 1)}
+    for where in ("between", "pause", None):
+        e = np.abs([x for x, w in errors if where in (None, w)])
+        if len(e):
+            key = where or "all"
+            row[f"{key}_n"] = len(e)
+            row[f"{key}_mean_ms"] = round(1000 * float(e.mean()), 1)
+            row[f"{key}_p90_ms"] = round(1000 * float(np.percentile(e, 90)), 1)
+    rows.append(row)
+    # 6. transcripts that do not fit: another sentence's, the letter left out, a word added
+    cases = {"another sentence's transcript (3 each)": [], "its letter left out": [], "a word added": []}
+    for i, (name, pcm, ref, words) in enumerate(sentences):
+        for k in (7, 13, 20):
+            other = sentences[(i + k) % n][3]
+            if other != words:
+                shared = sum(a == b for a, b in zip(other, words))
+                cases["another sentence's transcript (3 each)"].append((pcm, other, shared))
+        cases["its letter left out"].append((pcm, words[:3] + words[4:], len(words) - 1))
+        cases["a word added"].append((pcm, words[:2] + ["again"] + words[2:], len(words)))
+    for case, items in cases.items():
+        if ctx.quick:
+            items = items[::4]
+        got = [(_grid_align(pcm, " ".join(t)), shared) for pcm, t, shared in items]
+        warned = [bool(w) for (_, w), _ in got]
+        low = [bool(w) and al.confidence < 0.5 for (al, w), _ in got]
+        conf = np.array([al.confidence for (al, _), _ in got])
+        row = {"figure": "align-grid", "case": f"GRID s1, {case}",
+               "warned": f"{sum(warned)}/{len(warned)}", "warned_below_0.5": f"{sum(low)}/{len(low)}",
+               "confidence_median": round(float(np.median(conf)), 2),
+               "confidence_max": round(float(conf.max()), 2)}
+        if case.startswith("another"):
+            few = [lo for lo, (_, shared) in zip(low, got) if shared <= 2]
+            row["below_0.5_sharing_le_2_words"] = f"{sum(few)}/{len(few)}"
+        rows.append(row)

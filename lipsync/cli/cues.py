@@ -19,6 +19,7 @@ import os
 import sys
 from typing import Dict
 
+from ..frames import DEFAULT_FPS as DEFAULT_RENDER_FPS
 from ..writers import DEFAULT_FPS, DEFAULT_TIER, WRITERS
 from ._common import add_bank_option, add_quiet_option, add_timeline_options, load_viseme_timeline
 
@@ -36,9 +37,9 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                              "(.tsv, .json, .xml, .dat, .TextGrid, .txt)")
     parser.add_argument("--format", choices=WRITERS.names(), default=None, metavar="NAME",
                         help=f"cue format: {', '.join(WRITERS.names())} (default: from OUT's extension)")
-    parser.add_argument("--fps", type=float, default=DEFAULT_FPS, metavar="N",
-                        help="frame rate of Moho .dat keys and atlas frames (default: 24, Moho's and "
-                             "Rhubarb's default)")
+    parser.add_argument("--fps", type=float, default=None, metavar="N",
+                        help=f"frame rate of Moho .dat keys (default: {DEFAULT_FPS:g}, Moho's and Rhubarb's "
+                             f"default) and of atlas frames (default: {DEFAULT_RENDER_FPS:g}, as lipsync render)")
     parser.add_argument("--atlas", default=None, metavar="ATLAS.json",
                         help="for --format atlas: the atlas (from `lipsync atlas`) whose cells the frames name")
     parser.add_argument("--tier-name", default=DEFAULT_TIER, metavar="NAME",
@@ -58,7 +59,9 @@ def run(args: argparse.Namespace) -> int:
     from ..writers import format_for, write_cues
 
     name = args.format or format_for(args.output)  # a bad name fails before any reading
-    fps = float(args.fps)
+    # atlas frames are the frames a player shows: render's rate; Moho keys: Moho's own
+    default = DEFAULT_RENDER_FPS if WRITERS.get(name).name == "atlas" else DEFAULT_FPS
+    fps = float(default if args.fps is None else args.fps)
     if not (FPS_RANGE[0] <= fps <= FPS_RANGE[1]):
         raise InputError(f"--fps {args.fps:g} is outside {FPS_RANGE[0]:g}..{FPS_RANGE[1]:g}")
     if os.path.isdir(args.output):

@@ -25,7 +25,8 @@ def add_parser(sub) -> None:
                         "PNG frames (RGBA for a transparent bank)")
     add_bank_option(p)
     p.add_argument("--audio", default=None, metavar="FILE", help="speech audio to mux (wav, flac, mp3, ...)")
-    p.add_argument("--fps", type=float, default=DEFAULT_FPS, metavar="N", help="frames per second (default: 25)")
+    p.add_argument("--fps", type=float, default=DEFAULT_FPS, metavar="N",
+                   help=f"frames per second (default: {DEFAULT_FPS:g})")
     p.add_argument("--method", choices=METHODS.names(), default="flow",
                    help="in-between method (default: flow)")
     p.add_argument("--format", choices=ENCODERS.names(), default=None,

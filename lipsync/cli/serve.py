@@ -12,6 +12,7 @@ from ._common import TIMING_HELP, add_bank_option, add_quiet_option, add_store_o
 
 def add_parser(sub) -> None:
     from ..server import (DEFAULT_IDLE_TIMEOUT_S, DEFAULT_MAX_SESSIONS, DEFAULT_MAX_UPLOAD, DEFAULT_QUALITY)
+    from ..frames import DEFAULT_FPS
     from ..server.protocol import FPS_CHOICES
 
     p = sub.add_parser("serve", help="serve render jobs and live talking heads (HTTP + WebSocket, demo page)",
@@ -28,8 +29,8 @@ def add_parser(sub) -> None:
                    help=f"close a live session silent this long (default: {DEFAULT_IDLE_TIMEOUT_S:g} s)")
     p.add_argument("--max-upload-mb", type=float, default=DEFAULT_MAX_UPLOAD / (1 << 20), metavar="MB",
                    help=f"largest request body (default: {DEFAULT_MAX_UPLOAD >> 20} MB)")
-    p.add_argument("--fps", type=float, default=25.0, choices=FPS_CHOICES, metavar="N",
-                   help="frame rate of live sessions and render jobs (default: 25)")
+    p.add_argument("--fps", type=float, default=DEFAULT_FPS, choices=FPS_CHOICES, metavar="N",
+                   help=f"frame rate of live sessions and render jobs (default: {DEFAULT_FPS:g})")
     p.add_argument("--quality", type=int, default=DEFAULT_QUALITY, metavar="Q",
                    help=f"JPEG/WebP quality of live frames, 10-100 (default: {DEFAULT_QUALITY})")
     p.add_argument("--workers", type=int, default=None, metavar="N",

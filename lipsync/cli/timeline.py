@@ -11,10 +11,9 @@ from __future__ import annotations
 import argparse
 import sys
 
+from ..frames import DEFAULT_FPS
 from ..sequencer import FPS_RANGE, describe, plan_segments, sequence
 from ._common import add_timeline_options, load_viseme_timeline
-
-DEFAULT_FPS = 24.0
 
 
 def add_parser(subparsers) -> argparse.ArgumentParser:
@@ -26,7 +25,8 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     parser.add_argument("timeline", metavar="FILE", help="phoneme or viseme timeline file")
     add_timeline_options(parser)
     parser.add_argument("--fps", type=float, default=DEFAULT_FPS, metavar="N",
-                        help=f"output frame rate for --frames, {FPS_RANGE[0]:g} to {FPS_RANGE[1]:g} (default: 24)")
+                        help=f"output frame rate for --frames, {FPS_RANGE[0]:g} to {FPS_RANGE[1]:g} "
+                             f"(default: {DEFAULT_FPS:g}, as lipsync render)")
     parser.add_argument("--frames", action="store_true",
                         help="also print the frame schedule: frame, time, from, to, alpha")
     parser.set_defaults(func=run)

@@ -30,6 +30,7 @@ from ..bank import Bank
 from ..coarticulation import resolve_timing, viseme_classes
 from ..errors import InputError, TimelineError
 from ..phonemes import DEFAULT_MAP, PhonemeMap, bank_viseme_timeline, check_map_against, load_map
+from ..frames import DEFAULT_FPS
 from ..sequencer import FrameSpec
 from ..store import FlowStore
 from ..timeline import MAX_TIMELINE_S, PHONEME, VISEME, Segment, Timeline
@@ -98,7 +99,7 @@ class LiveAnimator:
     is pushed before the first frame, every frame equals the offline Animator's.
     """
 
-    def __init__(self, bank: Union[Bank, str, "os.PathLike[str]"], fps: float = 25, *,
+    def __init__(self, bank: Union[Bank, str, "os.PathLike[str]"], fps: float = DEFAULT_FPS, *,
                  map: Union[str, "os.PathLike[str]", PhonemeMap, None] = None, timing=None,
                  method: str = "flow", lookahead: Optional[float] = None, store: Optional[FlowStore] = None,
                  renderer: Optional[RendererPool] = None, prepare: Optional[bool] = None):

@@ -36,6 +36,7 @@ from pathlib import Path
 from typing import Optional
 
 from ..errors import InputError, check_number
+from ..frames import DEFAULT_FPS
 
 STATIC = Path(__file__).resolve().parent / "static"
 SAMPLES = Path(__file__).resolve().parents[2] / "samples"
@@ -76,7 +77,7 @@ class ServeConfig:
     map: Optional[str] = None
     timing: Optional[str] = None     # None: the bank's timing (bank.yaml), else the default curve
     method: str = "flow"
-    fps: float = 25.0
+    fps: float = DEFAULT_FPS
     quality: int = DEFAULT_QUALITY
     max_sessions: int = DEFAULT_MAX_SESSIONS
     idle_timeout: float = DEFAULT_IDLE_TIMEOUT_S

@@ -4,11 +4,22 @@ The stages, each a function over plain values::
 
     load_audio -> _frame_energy -> [_plan_chunks: cut at the quietest places]
     -> per chunk: [_recognise] or [_fitting_words] -> _force_align (words, then phones)
-    -> Alignment (words and phones timelines over the whole audio)
+    -> [_phone_loop_scores -> _acoustic_fit: does the transcript fit?]
+    -> _cap_pause_closures -> Alignment (words and phones timelines over the whole audio)
 
 * With a transcript, the words are normalised (:func:`normalise_transcript`), words the
   dictionary lacks get a pronunciation from :func:`pronounce` (listed in one warning), and
-  pocketsphinx aligns them (its align search, then a state-level second pass for phones).
+  pocketsphinx aligns them: a grammar of exactly the transcript's words, each with its
+  pronunciations (:func:`~lipsync.speech.lexicon.pronunciations`), silence and noise
+  allowed between them, which cannot return other words (:func:`_force_align`); then a
+  state-level second pass places the phones inside the words found.
+* How well the transcript fits is measured against what the audio holds without it: the
+  acoustic score of the aligned words per frame against a free phone loop's over the same
+  frames (:func:`_acoustic_fit`). A transcript that aligns keeps its alignment, and the
+  confidence figure says how well it fits; only one that really does not fit (no path, or
+  a fit below :data:`NOT_FIT_CONFIDENCE`) goes the relaxed way below. (Recordings longer
+  than :data:`MAX_CHUNK_S` are judged by the share of their words found instead: the phone
+  loop would double their CPU time.)
 * Without one, the words are recognised first with pocketsphinx's US-English language
   model (in chunks of :data:`RECOGNITION_CHUNK_S`, in worker processes when there are
   several), then their phones are aligned inside the recognised word boundaries.
@@ -18,9 +29,11 @@ The stages, each a function over plain values::
   the next transcript words that fit it (:func:`_align_long`). Time and memory then grow
   linearly with the audio.
 * A transcript that does not fit: a second search may skip any of its words
-  (:func:`_fitting_words`); if even that fails, the recognised words are used. Either way
-  a warning gives a confidence figure. Silence-only audio gives empty timelines spanning
-  the audio.
+  (:func:`_fitting_words`; the warning names the words left out); if even that fails, the
+  recognised words are used. Either way a warning gives a confidence figure. Silence-only
+  audio gives empty timelines spanning the audio.
+* A stop (P B T D K G) after a pause starts with a silent closure that no aligner can tell
+  from the pause; its length is capped (:data:`MAX_PAUSE_CLOSURE_S`).
 
 Examples
 --------
@@ -43,7 +56,7 @@ import numpy as np
 
 from ..timeline import PHONEME, Segment, Timeline
 from .audio import SAMPLE_RATE, load_audio
-from .lexicon import _add_stress, lookup_missing, normalise_transcript, pronounce
+from .lexicon import _add_stress, lookup_missing, normalise_transcript, pronounce, pronunciations
 
 PathLike = Union[str, "os.PathLike[str]"]
 
@@ -51,7 +64,7 @@ __all__ = ["Alignment", "align", "align_samples", "AlignmentWarning", "MissingWo
            "read_transcript", "VERSION"]
 
 #: Bumped when alignment results change (part of any cache key).
-VERSION = 1
+VERSION = 2
 
 #: pocketsphinx's frame shift (its -frate is 100 frames per second).
 FRAME_S = 0.01
@@ -83,6 +96,12 @@ BOUNDARY_OFFSET_S = 0.0
 
 #: Below this confidence a transcript is reported as not fitting the audio.
 LOW_CONFIDENCE = 0.5
+#: Below this acoustic fit (:func:`_acoustic_fit`) a transcript whose words all aligned is
+#: taken as not what was said, and the relaxed search looks for the words that are there.
+#: A fit of 0.2 is a score 6 units a frame below the free phone loop's; the 40 GRID
+#: sentences with their own transcripts measured 2.8 to 21 above it (fit 0.64 to 1), the
+#: MFA recording 8.8, the espeak samples 11 and 20.
+NOT_FIT_CONFIDENCE = 0.2
 #: Share of a long transcript's words that may go unfound without a warning.
 SKIPPED_SHARE_OK = 0.08
 #: Frames within this many dB of the loudest are counted as speech by the confidence check:
@@ -98,7 +117,7 @@ RECOGNITION_CHUNK_S = 15.0
 MIN_CHUNKS_FOR_WORKERS = 2
 
 # pocketsphinx's names for silence and noise: words and phones that are not speech.
-_NON_SPEECH_WORDS = frozenset({"<s>", "</s>", "<sil>", "[noise]", "[speech]", "<unk>"})
+_NON_SPEECH_WORDS = frozenset({"<s>", "</s>", "<sil>", "[noise]", "[speech]", "<unk>", "(null)"})
 _NON_SPEECH_PHONES = frozenset({"SIL", "+NSN+", "+SPN+", "+BREATH+", "+NOISE+"})
 _VARIANT = re.compile(r"\(\d+\)$")
 
@@ -135,9 +154,13 @@ class Alignment:
     recognised : bool
         True if the words came from recognition (no transcript, or one that did not fit).
     confidence : float or None
-        For a transcript: the share of its words that fit the audio (0..1).
+        For a transcript, how well it fits the audio (0..1): the smallest of the share of
+        its words found, the share of the speech they cover, and how well their sounds
+        match the audio against free phones (0.5: as well; :data:`LOW_CONFIDENCE`).
     missing : tuple of str
         Transcript words that needed the letter-to-sound fallback.
+    skipped : tuple of str
+        Transcript words that were not found in the audio and were left out (in order).
 
     Examples
     --------
@@ -154,22 +177,51 @@ class Alignment:
     recognised: bool = False
     confidence: Optional[float] = None
     missing: Tuple[str, ...] = field(default=())
+    skipped: Tuple[str, ...] = field(default=())
 
 
 # --- decoders (one of each kind per process, loading the model takes ~0.5 s) --------------
 
-#: Forced-alignment settings. topn is how many Gaussians of each senone's mixture are scored
-#: per frame: pocketsphinx's default of 4 is tuned for recognition speed; 8 brought the mean
-#: boundary error against MFA from 18.9 to 17.7 ms (and frames with MFA's mouth shape from
-#: 87.1 to 87.9%) for 30% more CPU; 16 and 32 were no better.
-ALIGNER_SETTINGS = dict(topn=8)
+#: Forced-alignment settings.
+#:
+#: * topn is how many Gaussians of each senone's mixture are scored per frame: pocketsphinx's
+#:   default of 4 is tuned for recognition speed; 8 brought the mean boundary error against
+#:   MFA from 18.9 to 17.7 ms (and frames with MFA's mouth shape from 87.1 to 87.9%) for 30%
+#:   more CPU; 16 and 32 were no better.
+#: * bestpath off: the word segmentation is the grammar search's own Viterbi path, not a
+#:   best path through its lattice. The lattice path begins with a one-frame ``<s>`` at
+#:   frame 0 overlapping the first silence whenever that path is chosen, and the phone pass
+#:   built from it cannot fit a silence model into one frame ("Failed to reach final state
+#:   in alignment"): 5 of the 40 GRID sentences (issue 20) failed so and were replaced by
+#:   recognised words; with the search's own path all 40 align.
+#: * fsgusealtpron off: the grammars list each word's pronunciations themselves
+#:   (:func:`~lipsync.speech.lexicon.pronunciations`: CMUdict's but "wh" = HH W, plus
+#:   letter names as said outside the US).
+ALIGNER_SETTINGS = dict(topn=8, bestpath=False, fsgusealtpron=False)
+
+#: The phones of the free phone loop (:func:`_phone_loop_scores`): ARPAbet's 39.
+LOOP_PHONES = ("AA AE AH AO AW AY B CH D DH EH ER EY F G HH IH IY JH K L M N NG OW OY P R S SH T "
+               "TH UH UW V W Y Z ZH").split()
+#: Probability of each further phone in the free loop (a phone insertion penalty). The fit
+#: measure hardly depends on it: on the GRID sentences 0.5, 0.05 and 0.005 gave the same
+#: order of right and wrong transcripts (lowest right 2.9, 2.8, 3.0 units a frame).
+LOOP_PHONE_PROB = 0.05
+# Dictionary names of the loop's one-phone words: "_" never occurs in a normalised word.
+_LOOP_WORD = "ph_{}"
 
 
 @functools.lru_cache(maxsize=1)
 def _aligner():
     from pocketsphinx import Decoder
 
-    return Decoder(lm=None, loglevel="FATAL", **ALIGNER_SETTINGS)
+    d = Decoder(lm=None, loglevel="FATAL", **ALIGNER_SETTINGS)
+    for p in LOOP_PHONES:
+        d.add_word(_LOOP_WORD.format(p.lower()), p, False)
+    loop = [(0, 0, LOOP_PHONE_PROB, _LOOP_WORD.format(p.lower())) for p in LOOP_PHONES]
+    # one state that starts and ends the grammar: no null transition, whose "(NULL)"
+    # segment the phone pass could not align
+    d.add_fsg("loop", d.create_fsg("loop", 0, 0, loop))
+    return d
 
 
 @functools.lru_cache(maxsize=1)
@@ -183,6 +235,21 @@ def _ensure_words(decoder, words: Sequence[str]) -> None:
     for w in lookup_missing(words):
         if decoder.lookup_word(w) is None:
             decoder.add_word(w, " ".join(p.rstrip("012") for p in pronounce(w)), True)
+
+
+def _arcs(decoder, word: str) -> List[str]:
+    """The decoder's dictionary names of ``word``'s pronunciations (added when missing)."""
+    names = []
+    for name, phones in pronunciations(word):
+        if decoder.lookup_word(name) is None:
+            decoder.add_word(name, " ".join(phones), True)
+        names.append(name)
+    return names
+
+
+def _use_grammar(decoder, name: str, final: int, transitions) -> None:
+    decoder.add_fsg(name, decoder.create_fsg(name, 0, final, transitions))
+    decoder.activate_search(name)
 
 
 def _decode(decoder, pcm: np.ndarray) -> None:
@@ -244,7 +311,30 @@ def _dither(pcm: np.ndarray) -> np.ndarray:
 _WordTiming = Tuple[str, int, int, List[Tuple[str, int, int]]]  # word, start, end (frames), phones
 
 
-def _timings(al) -> List[_WordTiming]:
+@dataclass
+class _Forced:
+    """A forced alignment: word timings and, when the phone pass ran, acoustic scores.
+
+    ``scores`` has each word's, ``frames`` every frame's (words, silence and noise alike).
+    """
+
+    timings: List[_WordTiming]
+    scores: Optional[List[int]]
+    frames: Optional[np.ndarray] = None
+
+
+def _frame_scores(al, n_frames: int) -> np.ndarray:
+    """Acoustic score of every frame of a state alignment (its states' scores spread evenly)."""
+    per = np.zeros(n_frames)
+    for w in al:
+        for p in w:
+            for st in p:
+                if st.duration > 0:
+                    per[st.start: st.start + st.duration] = st.score / st.duration
+    return per
+
+
+def _timings(al, scores: Optional[list] = None) -> List[_WordTiming]:
     out: List[_WordTiming] = []
     for w in al:
         name = _VARIANT.sub("", w.name).lower()
@@ -253,28 +343,110 @@ def _timings(al) -> List[_WordTiming]:
         phones = [(p.name, p.start, p.start + p.duration) for p in w if p.name not in _NON_SPEECH_PHONES]
         if phones:
             out.append((name, w.start, w.start + w.duration, phones))
+            if scores is not None:
+                scores.append(w.score)
     return out
 
 
-def _force_align(pcm: np.ndarray, words: Sequence[str]) -> Optional[List[_WordTiming]]:
-    """Word and phone frames of ``words`` in ``pcm``, or None if the search finds no path."""
+def _heard(decoder) -> List[Tuple[str, int, int]]:
+    """(word, start frame, end frame exclusive) of the last search's speech words."""
+    out = []
+    for seg in decoder.seg():
+        name = _VARIANT.sub("", seg.word).lower()
+        if name not in _NON_SPEECH_WORDS:
+            out.append((name, seg.start_frame, seg.end_frame + 1))
+    return out
+
+
+def _force_align(pcm: np.ndarray, words: Sequence[str]) -> Optional[_Forced]:
+    """Word and phone frames of ``words`` in ``pcm``, or None if the search finds no path.
+
+    The grammar is exactly the words in order, each with its pronunciations, with
+    pocketsphinx's silence and noise fillers allowed before, between and after them: it
+    cannot return other words. If the phone pass fails after the words were found, the
+    words keep their times and share them evenly among their phones.
+    """
     if not words:
-        return []
+        return _Forced([], [])
     d = _aligner()
     _ensure_words(d, words)
+    transitions = [(i, i + 1, 1.0, name) for i, w in enumerate(words) for name in _arcs(d, w)]
     try:
-        d.set_align_text(" ".join(words))
-        # end_utt raises when the align search reaches the end of the audio without
-        # reaching the end of the words: the transcript does not fit this audio.
+        _use_grammar(d, "exact", len(words), transitions)
+        _decode(d, pcm)
+        heard = _heard(d) if d.hyp() is not None else []
+    except RuntimeError:
+        return None
+    if [w for w, _, _ in heard] != list(words):
+        return None  # the search ended without reaching the last word: no path
+    try:
+        d.set_alignment()  # second pass: phone and state boundaries within the words found
+        _decode(d, pcm)
+        al = d.get_alignment()
+    except RuntimeError:
+        al = None
+    if al is not None:
+        scores: List[int] = []
+        got = _timings(al, scores)
+        if [w for w, *_ in got] == list(words):
+            return _Forced(got, scores, _frame_scores(al, len(pcm) // _SAMPLES_PER_FRAME + 2))
+    return _Forced([_even_phones(w, a, b) for w, a, b in heard], None)
+
+
+def _phone_loop_scores(pcm: np.ndarray) -> Optional[np.ndarray]:
+    """Acoustic score of every 10 ms frame on the best path of a free phone loop.
+
+    Any phone may follow any other (:data:`LOOP_PHONES`, :data:`LOOP_PHONE_PROB`), with
+    silence and noise between: what the audio holds with no transcript at all. Scored by
+    the same state pass as a forced alignment, so the two compare frame by frame.
+    """
+    d = _aligner()
+    try:
+        d.activate_search("loop")
         _decode(d, pcm)
         if d.hyp() is None:
             return None
-        d.set_alignment()  # second pass: phone and state boundaries within the words found
+        d.set_alignment()
         _decode(d, pcm)
+        al = d.get_alignment()
     except RuntimeError:
         return None
-    al = d.get_alignment()
-    return None if al is None else _timings(al)
+    if al is None:
+        return None
+    return _frame_scores(al, len(pcm) // _SAMPLES_PER_FRAME + 2)
+
+
+#: Scale of :func:`_acoustic_fit`: a transcript whose sounds score this many units a frame
+#: (pocketsphinx's log scale) above the free phone loop fits at 1, as many below at 0.
+#: Measured on the 40 GRID sentences (issue 20): with their own transcripts the words scored
+#: 2.8 to 21 above the loop (median 13) and the speech 4.0 to 22; with another sentence's
+#: transcript mostly far below (-40), the highest those sharing three or more words.
+FIT_LLR_SPAN = 10.0
+
+
+def _acoustic_fit(loop: Optional[np.ndarray], forced: Optional[_Forced],
+                  speech: Optional[np.ndarray] = None) -> Optional[float]:
+    """How well the aligned transcript explains its audio, 0..1 (0.5: as well as free phones do).
+
+    Two log likelihood ratios per frame against the free phone loop (:func:`_phone_loop_scores`),
+    each mapped linearly with :data:`FIT_LLR_SPAN`, and the smaller one taken: over the
+    frames of the words (words forced onto other sounds score far worse than the loop),
+    and over the ``speech`` frames, words and the silence and noise between them alike
+    (speech the transcript leaves to silence scores far worse too). A transcript that was
+    said scores about as well as the loop or better: the loop pays for every phone it
+    inserts. None when a score is missing.
+    """
+    if loop is None or forced is None or forced.scores is None or not forced.timings:
+        return None
+    frames = sum(we - ws for _, ws, we, _ in forced.timings)
+    free = sum(float(loop[ws:we].sum()) for _, ws, we, _ in forced.timings)
+    ratios = [(float(sum(forced.scores)) - free) / max(frames, 1)]
+    if speech is not None and forced.frames is not None:
+        n = min(len(speech), len(forced.frames), len(loop))
+        mask = speech[:n]
+        if mask.any():
+            ratios.append(float((forced.frames[:n][mask] - loop[:n][mask]).mean()))
+    return float(np.clip(0.5 + min(ratios) / (2 * FIT_LLR_SPAN), 0.0, 1.0))
 
 
 #: Probability of skipping a transcript word in the tolerant pass (:func:`_fitting_words`).
@@ -303,14 +475,15 @@ def _fitting_words(pcm: np.ndarray, words: Sequence[str], *, prefix: bool = Fals
     n = len(words)
     transitions = []
     for i, w in enumerate(words):
-        transitions += [(i, i + 1, 1.0 - SKIP_PROB, w), (i, i + 1, SKIP_PROB)]
+        transitions += [(i, i + 1, 1.0 - SKIP_PROB, name) for name in _arcs(d, w)]
+        transitions.append((i, i + 1, SKIP_PROB))
         if prefix and i > 0:
             transitions.append((i, n, END_PROB))
     try:
-        d.add_fsg("fit", d.create_fsg("fit", 0, n, transitions))
-        d.activate_search("fit")
+        _use_grammar(d, "fit", n, transitions)
         _decode(d, pcm)
-        heard = [w for w in (_VARIANT.sub("", s.word).lower() for s in d.seg()) if w not in _NON_SPEECH_WORDS]
+        # a skipped word is a null transition, which the segmentation lists as "(NULL)"
+        heard = [w for w, _, _ in _heard(d)]
     except (RuntimeError, ValueError, TypeError):
         return []
     kept, i = [], 0
@@ -323,14 +496,52 @@ def _fitting_words(pcm: np.ndarray, words: Sequence[str], *, prefix: bool = Fals
     return kept
 
 
-def _align_words(pcm: np.ndarray, words: Sequence[str]) -> Tuple[Optional[List[_WordTiming]], int]:
-    """(timings, words skipped): strict alignment, else alignment of the words that fit."""
-    got = _force_align(pcm, words)
-    if got is not None or not words:
-        return got, 0
-    kept = [words[i] for i in _fitting_words(pcm, words)]
-    got = _force_align(pcm, kept) if kept else None
-    return got, len(words) - len(kept)
+def _align_words(pcm: np.ndarray, words: Sequence[str], loop, speech: Optional[np.ndarray] = None
+                 ) -> Tuple[Optional[List[_WordTiming]], List[str], Optional[float]]:
+    """(timings, words left out, acoustic fit) of a transcript in one stretch of audio.
+
+    The strict alignment when it finds every word and fits at least at
+    :data:`NOT_FIT_CONFIDENCE`; else the words a tolerant search finds, aligned (timings
+    None when even those do not align). ``loop`` gives the phone loop's frame scores,
+    ``speech`` marks the frames that are speech.
+    """
+    forced = _force_align(pcm, words)
+    fit = _acoustic_fit(loop(), forced, speech) if forced is not None else None
+    if forced is not None and (fit is None or fit >= NOT_FIT_CONFIDENCE):
+        return forced.timings, [], fit
+    kept_at = set(_fitting_words(pcm, words))
+    kept = [w for i, w in enumerate(words) if i in kept_at]
+    relaxed = _force_align(pcm, kept) if kept else None
+    if relaxed is None and forced is not None:
+        # every word aligned, if badly, but no subset does: the transcript's alignment
+        return forced.timings, [], fit
+    left_out = [w for i, w in enumerate(words) if i not in kept_at]
+    if relaxed is None:
+        return None, left_out, fit
+    # the transcript's fit is its own (when all its words aligned), not only its kept words'
+    fits = [f for f in (fit, _acoustic_fit(loop(), relaxed, speech)) if f is not None]
+    return relaxed.timings, left_out, min(fits) if fits else None
+
+
+#: Longest silent closure kept for a stop (P B T D K G) that follows a pause. A stop's
+#: closure is silence, so after a pause the aligner can stretch it over any part of the
+#: pause (measured: "place" began 0.19 to 0.24 s before its burst in 3 of 10 GRID
+#: sentences). GRID's own aligner starts these words 30 to 100 ms before the stop's end
+#: (median 55 ms), and lips close about that long before a release.
+MAX_PAUSE_CLOSURE_S = 0.08
+_STOPS = frozenset({"P", "B", "T", "D", "K", "G"})
+
+
+def _cap_pause_closures(timings: List[_WordTiming]) -> List[_WordTiming]:
+    cap = int(round(MAX_PAUSE_CLOSURE_S / FRAME_S))
+    out: List[_WordTiming] = []
+    for w, ws, we, ph in timings:
+        after_pause = not out or out[-1][2] < ws
+        if after_pause and ph and ph[0][0].rstrip("012") in _STOPS and ph[0][2] - ph[0][1] > cap:
+            first = (ph[0][0], ph[0][2] - cap, ph[0][2])
+            ws, ph = first[1], [first] + ph[1:]
+        out.append((w, ws, we, ph))
+    return out
 
 
 def _recognise(pcm: np.ndarray) -> Tuple[List[str], List[_WordTiming]]:
@@ -438,13 +649,13 @@ WINDOW_MARGIN = 20
 def _align_long(piece, chunks, transcript, energy, bar):
     """Align a long transcript chunk by chunk, each taking the next words that fit it.
 
-    Returns (timings per chunk, words skipped, words that could not be aligned).
+    Returns (timings per chunk, words skipped, number of words that could not be aligned).
     """
     loud = energy > max(float(energy.max()) - SPEECH_BELOW_PEAK_DB, SILENCE_DBFS)
     rate = len(transcript) / max(float(loud.sum()) * FRAME_S, 1.0)  # words per second of speech
     bar.total = len(chunks)
     bar.refresh()
-    per_chunk, pointer, skipped, failed = [], 0, 0, 0
+    per_chunk, pointer, skipped, failed = [], 0, [], 0
     for i, (a, b) in enumerate(chunks):
         last = i == len(chunks) - 1
         speech_s = float(loud[a:b].sum()) * FRAME_S
@@ -452,16 +663,18 @@ def _align_long(piece, chunks, transcript, energy, bar):
         window = transcript[pointer: pointer + size]
         kept_at = _fitting_words(piece(a, b), window, prefix=not last)
         consumed = kept_at[-1] + 1 if kept_at else 0
-        skipped += consumed - len(kept_at)
+        skipped += [window[j] for j in range(consumed) if j not in set(kept_at)]
         pointer += consumed
         kept = [window[j] for j in kept_at]
-        got = _force_align(piece(a, b), kept) if kept else []
-        if got is None:  # the words found do not align after all: what is heard there
+        forced = _force_align(piece(a, b), kept) if kept else _Forced([], [])
+        if forced is None:  # the words found do not align after all: what is heard there
             failed += len(kept)
             got = _recognise(piece(a, b))[1]
+        else:
+            got = forced.timings
         per_chunk.append(got)
         bar.update()
-    skipped += len(transcript) - pointer
+    skipped += list(transcript[pointer:])
     return per_chunk, skipped, failed
 
 
@@ -519,7 +732,8 @@ def align_samples(pcm: np.ndarray, text: Optional[str] = None, *, quiet: bool = 
     MissingWordsWarning
         Transcript words not in the dictionary (one warning listing them all).
     AlignmentWarning
-        The transcript does not fit the audio; gives the confidence figure.
+        The transcript does not fit the audio; gives the confidence figure and names the
+        words left out.
 
     Examples
     --------
@@ -553,14 +767,18 @@ def align_samples(pcm: np.ndarray, text: Optional[str] = None, *, quiet: bool = 
     def piece(a: int, b: int) -> np.ndarray:
         return pcm[a * spf: b * spf]
 
+    @functools.lru_cache(maxsize=1)
+    def loop() -> Optional[np.ndarray]:
+        return _phone_loop_scores(pcm)
+
     timings: List[_WordTiming] = []
-    failed = skipped = 0
+    failed, skipped, fit = 0, [], None
     bar = tqdm(total=1, desc="align", unit="chunk", disable=quiet, leave=False)
     try:
         whole = None
         if has_text and duration <= MAX_CHUNK_S:
-            whole, skipped = _align_words(pcm, transcript)
-        strict_failed = has_text and skipped > 0
+            whole, skipped, fit = _align_words(pcm, transcript, loop, _speech_frames(energy))
+        strict_failed = has_text and bool(skipped)
         if whole is not None:
             timings = whole
             bar.update()
@@ -576,34 +794,48 @@ def align_samples(pcm: np.ndarray, text: Optional[str] = None, *, quiet: bool = 
                 bar.refresh()
                 workers = workers if len(chunks) >= MIN_CHUNKS_FOR_WORKERS else 1
                 per_chunk = [t for _, t in _run_jobs([("recognise", piece(a, b)) for a, b in chunks], workers, bar)]
-                failed, skipped = len(transcript), 0
+                failed, skipped = len(transcript), []
             for (a, _), got in zip(chunks, per_chunk):
                 timings += [(w, ws + a, we + a, [(p, ps + a, pe + a) for p, ps, pe in ph])
                             for w, ws, we, ph in got]
     finally:
         bar.close()
+    timings = _cap_pause_closures(timings)
 
     confidence = None
     if has_text:
-        fitted = 1.0 - (failed + skipped) / len(transcript)
-        confidence = min(fitted, _speech_in_words(energy, timings))
+        fitted = 1.0 - (failed + len(skipped)) / len(transcript)
+        confidence = min(fitted, _speech_in_words(energy, timings), 1.0 if fit is None else fit)
         # In a long recording a few words at chunk cuts may go unfound even when the
         # transcript is right (12 of 236 on the MFA recording four times over), so there
         # only a larger share counts as not fitting.
-        if failed or strict_failed or skipped > SKIPPED_SHARE_OK * len(transcript) or confidence < LOW_CONFIDENCE:
+        if (failed or strict_failed or len(skipped) > SKIPPED_SHARE_OK * len(transcript)
+                or confidence < LOW_CONFIDENCE):
             what = "does not fit the audio"
             if skipped:
-                what += f": {skipped} of its {len(transcript)} words were not found and were left out"
+                what += (f": {len(skipped)} of its {len(transcript)} words were not found and were left out "
+                         f"({_some(skipped)})")
             if failed:
                 what += (f"{',' if skipped else ':'} {failed} of its {len(transcript)} words could not be "
                          "aligned, and the words recognised there were used instead")
             if not (failed or skipped):
                 what = "fits the audio poorly; the alignment is a best effort"
             warnings.warn(f"{path or 'audio'}: the transcript {what} (confidence {confidence:.2f}: the "
-                          "smaller of the share of its words found and the share of the speech they cover)",
-                          AlignmentWarning, stacklevel=2)
+                          "smallest of the share of its words found, the share of the speech they cover "
+                          "and how well they match the sounds)", AlignmentWarning, stacklevel=2)
     return _to_alignment(timings, duration, path, transcript if has_text else tuple(w for w, *_ in timings),
-                         recognised=not has_text or failed > 0, confidence=confidence, missing=missing)
+                         recognised=not has_text or failed > 0, confidence=confidence, missing=missing,
+                         skipped=tuple(skipped) if has_text else ())
+
+
+def _some(words: Sequence[str], most: int = 8) -> str:
+    shown = ", ".join(words[:most])
+    return shown + (f" and {len(words) - most} more" if len(words) > most else "")
+
+
+def _speech_frames(energy: np.ndarray) -> np.ndarray:
+    """The frames that are speech: within :data:`SPEECH_BELOW_PEAK_DB` of the loudest."""
+    return energy > max(float(energy.max()) - SPEECH_BELOW_PEAK_DB, SILENCE_DBFS)
 
 
 def _speech_in_words(energy: np.ndarray, timings: List[_WordTiming]) -> float:
@@ -613,7 +845,7 @@ def _speech_in_words(energy: np.ndarray, timings: List[_WordTiming]) -> float:
     recording, whose pauses hold breaths; 0.99 on the espeak samples); half a transcript
     covers 0.32, one word of a sentence 0.07. Measured with :data:`SPEECH_BELOW_PEAK_DB`.
     """
-    speech = energy > max(float(energy.max()) - SPEECH_BELOW_PEAK_DB, SILENCE_DBFS)
+    speech = _speech_frames(energy)
     inside = np.zeros(len(energy), bool)
     for _, ws, we, _ in timings:
         inside[ws:we] = True

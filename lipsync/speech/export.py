@@ -93,6 +93,7 @@ def to_json(alignment) -> str:
         "recognised": alignment.recognised,
         "confidence": alignment.confidence,
         "missing_words": list(alignment.missing),
+        "skipped_words": list(alignment.skipped),
         "words": [{"word": s.label, "start": s.start, "end": s.end} for s in alignment.words],
         "phones": [{"phone": s.label, "start": s.start, "end": s.end} for s in alignment.phones],
     }

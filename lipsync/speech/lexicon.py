@@ -31,8 +31,8 @@ from typing import Dict, Iterable, List, Tuple
 
 from .text import normalise_transcript
 
-__all__ = ["pronounce", "lookup_missing", "normalise_transcript", "dictionary_path", "in_dictionary",
-           "VOWELS"]
+__all__ = ["pronounce", "pronunciations", "lookup_missing", "normalise_transcript", "dictionary_path",
+           "in_dictionary", "VOWELS"]
 
 #: ARPAbet vowels (the phones that carry a stress digit).
 VOWELS = frozenset("AA AE AH AO AW AY EH ER EY IH IY OW OY UH UW".split())
@@ -56,17 +56,22 @@ def dictionary_path() -> str:
 
 
 @functools.lru_cache(maxsize=1)
-def _dictionary() -> Dict[str, Tuple[str, ...]]:
-    # First pronunciation of each word only: "word(2)" variants are left to the aligner,
-    # which reads the dictionary file itself and may pick any variant.
-    entries: Dict[str, Tuple[str, ...]] = {}
+def _entries() -> Dict[str, List[Tuple[str, Tuple[str, ...]]]]:
+    # word -> [(entry name, phones)] in the file's order: "white", then "white(2)" ...
+    entries: Dict[str, List[Tuple[str, Tuple[str, ...]]]] = {}
     with open(dictionary_path(), encoding="utf-8") as f:
         for line in f:
             parts = line.split()
-            if len(parts) < 2 or "(" in parts[0]:
+            if len(parts) < 2:
                 continue
-            entries.setdefault(parts[0], tuple(parts[1:]))
+            entries.setdefault(parts[0].split("(")[0], []).append((parts[0], tuple(parts[1:])))
     return entries
+
+
+@functools.lru_cache(maxsize=1)
+def _dictionary() -> Dict[str, Tuple[str, ...]]:
+    # First pronunciation of each word only (the variants: :func:`pronunciations`).
+    return {word: variants[0][1] for word, variants in _entries().items()}
 
 
 def in_dictionary(word: str) -> bool:
@@ -238,6 +243,64 @@ def pronounce(word: str) -> Tuple[str, ...]:
             # Letters no rule reads still make a sound; a neutral vowel keeps the word timed.
             phones = ("AH",)
     return _add_stress(phones)
+
+
+# Letter names as most English speakers outside the US say them, which CMUdict (American)
+# lacks. Spelled letters are common in dictated codes and in the GRID corpus (British
+# speakers): without these the aligner must fit "ar" or "zed" to AA R or Z IY.
+_EXTRA_VARIANTS: Dict[str, Tuple[Tuple[str, ...], ...]] = {
+    "r": (("AA",),),            # non-rhotic accents (England, Wales, Australia, NZ, South Africa)
+    "z": (("Z", "EH", "D"),),   # "zed": everywhere but the US
+}
+
+
+def _is_wh_variant(phones: Tuple[str, ...], others: Iterable[Tuple[str, ...]]) -> bool:
+    # "white(2)" = HH W AY T beside W AY T: "wh" said with a breath, a fading US regional
+    # form. Offered to the aligner it takes a breath's length from the previous word's end
+    # (measured on the GRID sentences: 60 ms of "lay" given to the HH of "white").
+    return phones[:2] == ("HH", "W") and any(o == phones[1:] for o in others)
+
+
+@functools.lru_cache(maxsize=65536)
+def pronunciations(word: str) -> Tuple[Tuple[str, Tuple[str, ...]], ...]:
+    """Every pronunciation the aligner may choose for ``word``: (dictionary entry name, phones).
+
+    CMUdict's variants in its order ("with" = W IH DH, "with(2)" = W IH TH), without the
+    ones that only add a breath before "wh" (HH W); for spelled letters also the names
+    English speakers outside the US say ("r" = AA, "z" = Z EH D), named after CMUdict's
+    own entries ("r(2)"). A word CMUdict lacks has one: :func:`pronounce`'s. Phones carry
+    no stress digits (the aligner's dictionary has none).
+
+    Parameters
+    ----------
+    word : str
+        One normalised word (case is ignored).
+
+    Returns
+    -------
+    tuple of (str, tuple of str)
+        Entry names (``word`` first) and their phones; empty if ``word`` has no letters.
+
+    Examples
+    --------
+    >>> [name for name, _ in pronunciations("white")]     # HH W AY T is left out
+    ['white']
+    >>> pronunciations("z")
+    (('z', ('Z', 'IY')), ('z(2)', ('Z', 'EH', 'D')))
+    >>> pronunciations("a")
+    (('a', ('AH',)), ('a(2)', ('EY',)))
+    """
+    w = word.lower()
+    entries = _entries().get(w)
+    if entries is None:
+        phones = tuple(p.rstrip("012") for p in pronounce(w))
+        return ((w, phones),) if phones else ()
+    all_phones = [phones for _, phones in entries]
+    out = [(name, phones) for name, phones in entries if not _is_wh_variant(phones, all_phones)]
+    for k, phones in enumerate(_EXTRA_VARIANTS.get(w, ()), len(entries) + 1):
+        if phones not in all_phones:
+            out.append((f"{w}({k})", phones))
+    return tuple(out)
 
 
 def lookup_missing(words: Iterable[str]) -> List[str]:
