@@ -260,7 +260,29 @@ def _fixed_mmap_threshold(nbytes: int = 256 << 10) -> None:
         pass
 
 
-def test_20_concurrent_sessions_then_nothing_leaked(srv):
+def test_20_concurrent_sessions_then_nothing_leaked():
+    """Twenty sessions at once, a 21st refused, twice over: nothing per session is kept.
+
+    Measured in a fresh interpreter: inside a whole-suite process (about 1 GB after the
+    earlier tests) glibc's heap moved RSS by 10-30 MB between identical rounds however the
+    allocator was tuned (1 clean-clone run in 3 failed), which says nothing about this
+    server; alone, the same rounds measured -2..+6 MB.
+    """
+    out = subprocess.run([sys.executable, "-c", "import test_serve; test_serve._leak_check_alone()"],
+                         cwd=Path(__file__).parent, capture_output=True, text=True, timeout=600)
+    print(out.stdout)
+    assert out.returncode == 0, out.stdout + out.stderr
+
+
+def _leak_check_alone() -> None:
+    running = Running(max_sessions=20, idle_timeout=30)
+    try:
+        _leak_check(running)
+    finally:
+        running.stop()
+
+
+def _leak_check(srv) -> None:
     _fixed_mmap_threshold()
     events = hello_events()
 

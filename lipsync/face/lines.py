@@ -100,8 +100,8 @@ FACE_TEMPLATE: Tuple[FaceFeature, ...] = (
 # lie on ground that does not move.
 #: (name, (u0, v0), (u1, v1), why)
 _ANCHORS_FROM_EYES = (
-    ("neck_l", (-0.6, 2.35), (-0.6, 2.9), "side of the neck, below the lowest the chin goes"),
-    ("neck_r", (0.6, 2.35), (0.6, 2.9), "side of the neck, below the lowest the chin goes"),
+    ("neck_l", (-0.6, 2.3), (-0.6, 2.9), "side of the neck, below the lowest the chin goes"),
+    ("neck_r", (0.6, 2.3), (0.6, 2.9), "side of the neck, below the lowest the chin goes"),
     ("shoulders_l", (-2.8, 2.5), (-1.5, 2.2), "shoulder line"),
     ("shoulders_r", (2.8, 2.5), (1.5, 2.2), "shoulder line"),
 )
