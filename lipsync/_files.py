@@ -128,6 +128,39 @@ def remove_dead_partials_in(folder: PathLike) -> List[Path]:
     return removed
 
 
+def read_input_bytes(path: PathLike, what: str, *, error: type = None, limit: int = None,
+                     missing: str = "no such file") -> bytes:
+    """The bytes of a file the user named, or ``error`` (an :class:`~lipsync.errors.InputError`
+    class) naming it: missing, a folder ("not WHAT"), unreadable. With ``limit``, at most
+    ``limit + 1`` bytes are read, so a caller can refuse a larger file without loading it.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> from lipsync.errors import InputError
+    >>> d = tempfile.mkdtemp()
+    >>> try:
+    ...     read_input_bytes(d, "a manifest")
+    ... except InputError as exc:
+    ...     print(str(exc).endswith("is a folder, not a manifest"))
+    True
+    """
+    from .errors import InputError
+
+    error = error or InputError
+    try:
+        if limit is None:
+            return Path(path).read_bytes()
+        with open(path, "rb") as fh:
+            return fh.read(limit + 1)
+    except FileNotFoundError:
+        raise error(missing, path=path) from None
+    except IsADirectoryError:
+        raise error(f"is a folder, not {what}", path=path) from None
+    except OSError as exc:
+        raise error(f"cannot read: {exc.strerror or exc}", path=path) from None
+
+
 def _naming(exc: OSError, path: Path) -> OSError:
     """``exc`` again, its message naming ``path`` (the user's OUT, not our temporary file)."""
     return type(exc)(exc.errno, f"cannot write {path}: {exc.strerror or exc}")

@@ -55,6 +55,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Dict, List, Optional, Sequence, Tuple, Union
 
+from .._files import read_input_bytes
 from ..errors import InputError
 
 PathLike = Union[str, "os.PathLike[str]"]
@@ -246,15 +247,7 @@ def load_atlas(path: PathLike) -> Atlas:
         the file and the field).
     """
     p = Path(os.fspath(path))
-    try:
-        with open(p, "rb") as fh:
-            data = fh.read(MAX_JSON_BYTES + 1)
-    except FileNotFoundError:
-        raise InputError("no such file", path=p) from None
-    except IsADirectoryError:
-        raise InputError("is a folder, not an atlas JSON file", path=p) from None
-    except OSError as exc:
-        raise InputError(f"cannot read: {exc.strerror or exc}", path=p) from None
+    data = read_input_bytes(p, "an atlas JSON file", limit=MAX_JSON_BYTES)
     if len(data) > MAX_JSON_BYTES:
         raise InputError(f"larger than {MAX_JSON_BYTES >> 20} MB: not an atlas", path=p)
     try:

@@ -22,6 +22,7 @@ from dataclasses import dataclass
 from pathlib import Path, PurePosixPath
 from typing import Dict, List, Optional, Tuple, Union
 
+from .._files import read_input_bytes
 from ..errors import InputError
 from ..frames import DEFAULT_FPS
 
@@ -223,19 +224,14 @@ def read_manifest(path: PathLike, outdir: Optional[PathLike] = None) -> List[Cli
     from ..timing import CURVES, MODELS, timing_names
 
     path = Path(path)
-    try:
+    data = read_input_bytes(path, "a manifest", limit=MAX_MANIFEST_BYTES, missing="no such manifest")
+    if len(data) > MAX_MANIFEST_BYTES:
         size = path.stat().st_size
-        if size > MAX_MANIFEST_BYTES:
-            raise ManifestError(path, [(None, f"{size} bytes; a manifest is at most {MAX_MANIFEST_BYTES}")])
-        text = path.read_bytes().decode("utf-8-sig")
-    except FileNotFoundError:
-        raise InputError("no such manifest", path=path) from None
-    except IsADirectoryError:
-        raise InputError("is a folder, not a manifest", path=path) from None
+        raise ManifestError(path, [(None, f"{size} bytes; a manifest is at most {MAX_MANIFEST_BYTES}")])
+    try:
+        text = data.decode("utf-8-sig")
     except UnicodeDecodeError as exc:
         raise InputError(f"not UTF-8 text (byte {exc.start})", path=path) from None
-    except OSError as exc:
-        raise InputError(f"cannot read: {exc.strerror or exc}", path=path) from None
     base = path.resolve().parent
     out_real = Path(outdir).resolve() if outdir is not None else None
     rows = _rows(path, text)

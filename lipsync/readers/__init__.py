@@ -26,6 +26,7 @@ import os
 from pathlib import Path
 from typing import Optional
 
+from .._files import read_input_bytes
 from ..errors import InputError, TimelineError
 from ..timeline import PathLike, Timeline
 from .base import READERS, Reader, ReadOptions
@@ -104,14 +105,7 @@ def read_timeline(path: PathLike, format: Optional[str] = None, *, tier: Optiona
         raise InputError(f"sample rate must be a positive number, not {sample_rate!r}")
     if fps is None or not (0 < float(fps) < float("inf")):
         raise InputError(f"frame rate must be a positive number, not {fps!r}")
-    try:
-        data = Path(name).read_bytes()
-    except FileNotFoundError:
-        raise TimelineError("no such file", path=name) from None
-    except IsADirectoryError:
-        raise TimelineError("is a folder, not a timeline file", path=name) from None
-    except OSError as exc:
-        raise TimelineError(f"cannot read: {exc.strerror or exc}", path=name) from None
+    data = read_input_bytes(name, "a timeline file", error=TimelineError)
     if not data.strip():
         raise TimelineError("empty file", path=name, line=1)
     if reader is None:
