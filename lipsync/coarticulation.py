@@ -26,7 +26,13 @@ comes from the phones the map sends to it, :func:`viseme_classes`):
   average, so a three-way blend, which would need a new kernel path, is not worth it);
 * a closure (the map's ``closures``: P, B, M) is shown exactly on every frame inside its
   sound, and on the frame nearest its middle when it is shorter than a frame, whatever the
-  weights say: the most visible lip-sync error is lips that do not close.
+  weights say: the most visible lip-sync error is lips that do not close;
+* the breath before speech: speakers part their lips to draw breath before they speak
+  (measured on GRID s1: the mouth opens to about its slightly-open consonant shape 200-400
+  ms before the first sound, twice its opening at rest). After a pause of at least
+  :data:`BREATH_MIN_PAUSE_S`, the last ``breath.duration`` seconds before speech weigh
+  toward the map's ``breath`` viseme (Rhubarb's B) with their own dominance and tails, as
+  one more segment would; maps without a ``breath`` viseme have none.
 
 Closures and labiodentals (F, V) get high dominance, so they win over their neighbours
 (lips close on P/B/M, touch on F/V), rounded sounds a long anticipation (lips round ahead),
@@ -89,8 +95,31 @@ class ClassTiming(BaseModel):
     carryover: float = Field(ge=0, le=0.3)
 
 
+class BreathTiming(ClassTiming):
+    """Dominance constants of the breath before speech (module docstring).
+
+    Attributes
+    ----------
+    duration : float
+        Seconds before the first sound after a pause over which the breath viseme has full
+        dominance; 0 turns the breath off.
+    """
+
+    duration: float = Field(0.0, ge=0, le=0.3)
+
+
+#: No breath: what :class:`DominanceParams` made without a ``breath`` has.
+NO_BREATH = BreathTiming(dominance=1.0, anticipation=0.0, carryover=0.0, duration=0.0)
+
+#: Pauses at least this long end with a breath (shorter gaps lie between words of one breath
+#: group: a speaker does not inhale there). A cut of the live sequencer inside a pause keeps
+#: at least this much of it, so the window sees the same breaths.
+BREATH_MIN_PAUSE_S = 0.3
+
+
 class DominanceParams(BaseModel):
-    """The dominance model's constants: a lead and one :class:`ClassTiming` per class.
+    """The dominance model's constants: a lead, one :class:`ClassTiming` per class and the
+    breath before speech (:class:`BreathTiming`).
 
     Stored in bank.yaml under ``coarticulation:`` when fitted to a speaker (every key
     optional there: missing ones keep :data:`DEFAULT_PARAMS`' values).
@@ -111,6 +140,7 @@ class DominanceParams(BaseModel):
     open: ClassTiming
     other: ClassTiming
     rest: ClassTiming
+    breath: BreathTiming = NO_BREATH
 
     def of(self, cls: str) -> ClassTiming:
         return getattr(self, cls)
@@ -141,6 +171,12 @@ class ClassTimingOverrides(BaseModel):
     carryover: Optional[float] = Field(None, ge=0, le=0.3)
 
 
+class BreathTimingOverrides(ClassTimingOverrides):
+    """Some constants of the breath before speech, as bank.yaml may give them."""
+
+    duration: Optional[float] = Field(None, ge=0, le=0.3)
+
+
 class DominanceOverrides(BaseModel):
     """bank.yaml's ``coarticulation:``: constants fitted to the bank's speaker, every key optional.
 
@@ -158,6 +194,7 @@ class DominanceOverrides(BaseModel):
     open: Optional[ClassTimingOverrides] = None
     other: Optional[ClassTimingOverrides] = None
     rest: Optional[ClassTimingOverrides] = None
+    breath: Optional[BreathTimingOverrides] = None
 
     def apply(self, base: Optional["DominanceParams"] = None) -> "DominanceParams":
         """The full constants: ``base`` (default :data:`DEFAULT_PARAMS`) with these replaced."""
@@ -182,34 +219,41 @@ START_PARAMS = DominanceParams(
     open=ClassTiming(dominance=1.0, anticipation=0.08, carryover=0.08),
     other=ClassTiming(dominance=0.3, anticipation=0.06, carryover=0.06),
     rest=ClassTiming(dominance=0.5, anticipation=0.1, carryover=0.1),
+    breath=BreathTiming(dominance=0.5, anticipation=0.1, carryover=0.1, duration=0.2),
 )
 
 DEFAULT_PARAMS = DominanceParams(
     # Lips move ahead of the sound they make: the picture of speech leads its sound by tens
-    # of ms (start 0; fitted 12 ms).
-    lead=0.012,
-    # P, B, M: seven times a vowel's pull, short tails: the lips close for the stop and open
-    # at its release (start: 8, 40 ms; fitted 7.2, 41 ms). The fit is flat in this
-    # dominance, as every frame inside a closure shows it anyway (``closures``); it matters
-    # for the frames around one, where the lips are on their way to or from closing.
-    closure=ClassTiming(dominance=7.2, anticipation=0.04, carryover=0.04),
-    # F, V: the most dominant (lower lip to the upper teeth must happen, and no frame is
-    # forced for it), as brief as a closure (start 4; fitted to the bound of 10, see
-    # FIT_DOMINANCE_RANGE).
-    labiodental=ClassTiming(dominance=10.0, anticipation=0.04, carryover=0.04),
-    # UW, W, R, AO ...: a vowel's pull, but rounding starts earlier, 115 ms ahead of the
-    # sound (start: 2, 150 ms; fitted 0.96, 115 ms, and 73 ms after).
-    rounded=ClassTiming(dominance=0.96, anticipation=0.115, carryover=0.073),
-    # Vowels: the unit of dominance; their pull reaches 73 ms either side (start: 80 ms).
-    open=ClassTiming(dominance=1.0, anticipation=0.073, carryover=0.073),
+    # of ms (start 0; fitted 13 ms).
+    lead=0.013,
+    # P, B, M: ten times a vowel's pull, short tails: the lips close for the stop and open
+    # at its release (start: 8, 40 ms; fitted to the bound of 10, FIT_DOMINANCE_RANGE, and
+    # 39 ms). The fit is flat in this dominance, as every frame inside a closure shows it
+    # anyway (``closures``); it matters for the frames around one, where the lips are on
+    # their way to or from closing.
+    closure=ClassTiming(dominance=10.0, anticipation=0.039, carryover=0.039),
+    # F, V: seven times a vowel's pull (lower lip to the upper teeth must happen, and no
+    # frame is forced for it), as brief as a closure (start 4; fitted 7.1, 39 ms).
+    labiodental=ClassTiming(dominance=7.1, anticipation=0.039, carryover=0.039),
+    # UW, W, R, AO ...: a vowel's pull, but rounding starts earlier, 117 ms ahead of the
+    # sound (start: 2, 150 ms; fitted 0.84, 117 ms, and 76 ms after).
+    rounded=ClassTiming(dominance=0.84, anticipation=0.117, carryover=0.076),
+    # Vowels: the unit of dominance; their pull reaches 76 ms either side (start: 80 ms).
+    open=ClassTiming(dominance=1.0, anticipation=0.076, carryover=0.076),
     # Tongue consonants (T, S, K, N, L ...) and the close front vowels that share their
-    # viseme in small viseme sets: a sixth of a vowel's pull, so neighbouring vowels and lip
-    # sounds shape the mouth over them (start 0.3; fitted 0.17).
-    other=ClassTiming(dominance=0.17, anticipation=0.073, carryover=0.073),
-    # Silence: under half a vowel's pull, so a short pause keeps the shape around it, but
-    # its 165 ms tails relax the mouth into a pause and out of it (start: 0.5, 100 ms; fitted
-    # 0.41, 165 ms). This anticipation is the longest, so it sets the live look-ahead.
-    rest=ClassTiming(dominance=0.41, anticipation=0.165, carryover=0.165),
+    # viseme in small viseme sets: a tenth of a vowel's pull, so neighbouring vowels and lip
+    # sounds shape the mouth over them (start 0.3; fitted to the bound of 0.1).
+    other=ClassTiming(dominance=0.1, anticipation=0.076, carryover=0.076),
+    # Silence: a third of a vowel's pull, so a short pause keeps the shape around it, but
+    # its 181 ms tails relax the mouth into a pause and out of it (start: 0.5, 100 ms;
+    # fitted 0.32, 181 ms).
+    rest=ClassTiming(dominance=0.32, anticipation=0.181, carryover=0.181),
+    # The breath before speech: the lips part 258 ms before the first sound after a pause,
+    # pulling harder than the pause around them (start: 0.5, 200 ms, tails 100 ms; fitted
+    # 1.4, tails 109 ms, and the 258 ms that keep the live look-ahead at the bound
+    # FIT_MAX_LOOKAHEAD_S: 13 + 258 + 109 = 380 ms). This is the longest reach ahead, so it
+    # sets the live look-ahead (of maps with a breath viseme).
+    breath=BreathTiming(dominance=1.4, anticipation=0.109, carryover=0.109, duration=0.258),
 )
 
 #: A blend this close to one viseme is shown as that viseme. Dominance tails make long
@@ -277,41 +321,73 @@ def resolve_timing(timing=None, bank=None):
     return timing
 
 
-def lookahead(params: DominanceParams = DEFAULT_PARAMS) -> float:
+def lookahead(params: DominanceParams = DEFAULT_PARAMS, *, breath: bool = True) -> float:
     """Seconds of data past a frame's time that decide it: the longest anticipation plus the lead.
 
     A sound starting at ``s`` weighs on frames from ``s - lead - anticipation`` on, and on
-    no earlier one; everything else a frame depends on (the sound it lies in, the tails of
-    earlier sounds, closures within half a frame) is older.
+    no earlier one; the breath before it (``breath``: when the map has a breath viseme)
+    from ``s - lead - breath.duration - breath.anticipation`` on. Everything else a frame
+    depends on (the sound it lies in, the tails of earlier sounds, closures within half a
+    frame, the length of the pause it lies in) is older.
 
     Examples
     --------
     >>> p = DEFAULT_PARAMS.merged({"lead": 0.02, "rounded": {"anticipation": 0.2}})
-    >>> round(lookahead(p), 3)
+    >>> round(lookahead(p, breath=False), 3)
     0.22
     """
-    return max(0.0, params.lead + max(params.of(c).anticipation for c in CLASSES))
+    reach = max(params.of(c).anticipation for c in CLASSES)
+    if breath and params.breath.duration > 0:
+        reach = max(reach, params.breath.duration + params.breath.anticipation)
+    return max(0.0, params.lead + reach)
 
 
 def carryover(params: DominanceParams = DEFAULT_PARAMS) -> float:
-    """Seconds after a sound's end (less the lead) that its dominance still reaches."""
-    return max(0.0, max(params.of(c).carryover for c in CLASSES) - params.lead)
+    """Seconds after a sound's end (less the lead) that its dominance still reaches (a
+    breath's too)."""
+    return max(0.0, max(params.of(c).carryover for c in CLASSES + ("breath",)) - params.lead)
 
 
-def viseme_classes(pmap, rest: Optional[str] = None) -> Dict[str, str]:
+class VisemeClasses(dict):
+    """Viseme -> class (:data:`CLASSES`), and the viseme of the breath before speech.
+
+    A plain dict of the classes, with ``breath`` (a viseme name, or None for no breath)
+    beside them, so that everything that hands a map's classes to the model hands on its
+    breath viseme too.
+
+    Examples
+    --------
+    >>> c = VisemeClasses({"X": "rest", "B": "other"}, breath="B")
+    >>> c["X"], c.breath
+    ('rest', 'B')
+    """
+
+    def __init__(self, classes=(), breath: Optional[str] = None):
+        super().__init__(classes)
+        self.breath = breath
+
+    def __repr__(self) -> str:
+        return f"VisemeClasses({dict.__repr__(self)}, breath={self.breath!r})"
+
+    def __reduce__(self):
+        return (VisemeClasses, (dict(self), self.breath))
+
+
+def viseme_classes(pmap, rest: Optional[str] = None) -> VisemeClasses:
     """Each viseme of a phoneme map -> its class (:data:`CLASSES`), from the phones it shows.
 
     The map's ``closures`` are ``closure`` and its silence viseme ``rest``; any other viseme
     takes the class most of its phones have (a diphthong's half counts half): ``labiodental``
     (F, V), ``rounded`` (UW, UH, OW, AO, W, R, ER), ``open`` (other vowels) or ``other``
-    (tongue consonants). Phones outside the English phone set count as ``other``.
+    (tongue consonants). Phones outside the English phone set count as ``other``. The map's
+    ``breath`` viseme comes along as ``.breath``.
 
     Examples
     --------
     >>> from lipsync.phonemes import load_map
     >>> c = viseme_classes(load_map("english-to-rhubarb"))
-    >>> [c[v] for v in "ABCDEFGHX"]
-    ['closure', 'other', 'open', 'open', 'rounded', 'rounded', 'labiodental', 'other', 'rest']
+    >>> [c[v] for v in "ABCDEFGHX"], c.breath
+    (['closure', 'other', 'open', 'open', 'rounded', 'rounded', 'labiodental', 'other', 'rest'], 'B')
     """
     votes: Dict[str, Dict[str, float]] = {}
     for phone, target in pmap.map.items():
@@ -348,16 +424,17 @@ def viseme_classes(pmap, rest: Optional[str] = None) -> Dict[str, str]:
     for v in pmap.closures:
         out[v] = "closure"
     out[rest if rest is not None else pmap.silence] = "rest"
-    return out
+    return VisemeClasses(out, breath=getattr(pmap, "breath", None))
 
 
-def default_classes(names: Iterable[str], *, rest: str, closures: Iterable[str] = ()) -> Dict[str, str]:
+def default_classes(names: Iterable[str], *, rest: str, closures: Iterable[str] = ()) -> VisemeClasses:
     """Classes for visemes when no map is given: the default map's, where the names are its.
+    No breath: without a map, which viseme the bank draws breath with is unknown.
 
     Examples
     --------
     >>> default_classes(["A", "F", "zz"], rest="X", closures=["A"])
-    {'A': 'closure', 'F': 'rounded', 'zz': 'other', 'X': 'rest'}
+    VisemeClasses({'A': 'closure', 'F': 'rounded', 'zz': 'other', 'X': 'rest'}, breath=None)
     """
     from .phonemes import DEFAULT_MAP, load_map
 
@@ -366,7 +443,7 @@ def default_classes(names: Iterable[str], *, rest: str, closures: Iterable[str] 
     for v in closures:
         out[v] = "closure"
     out[rest] = "rest"
-    return out
+    return VisemeClasses(out)
 
 
 def plan(visemes: Timeline, *, rest: str, closures: Iterable[str] = (), duration: Optional[float] = None,
@@ -389,9 +466,42 @@ def _tail(x: np.ndarray) -> np.ndarray:
     return np.where(x < 1.0, np.cos(0.5 * np.pi * np.minimum(x, 1.0)) ** 2, 0.0)
 
 
+def breaths(segments: Sequence[Tuple[float, float, str]], *, classes: Mapping[str, str],
+            params: DominanceParams = DEFAULT_PARAMS) -> List[Tuple[float, float, str]]:
+    """The breaths before speech of a planned track: ``(start, end, breath viseme)`` each.
+
+    One at the end of every rest segment of at least :data:`BREATH_MIN_PAUSE_S` that speech
+    follows, ``params.breath.duration`` long (or the whole pause, if shorter). None when
+    ``classes`` has no ``breath`` viseme (:class:`VisemeClasses`) or the duration is 0.
+
+    Examples
+    --------
+    >>> c = VisemeClasses({"X": "rest", "A": "closure", "B": "other"}, breath="B")
+    >>> p = DEFAULT_PARAMS.merged({"breath": {"duration": 0.2}})
+    >>> breaths([(0, 0.5, "X"), (0.5, 0.6, "A"), (0.6, 0.8, "X"), (0.8, 0.9, "A")], classes=c, params=p)
+    [(0.3, 0.5, 'B')]
+    """
+    viseme = getattr(classes, "breath", None)
+    duration = params.breath.duration
+    if viseme is None or duration <= 0:
+        return []
+    out = []
+    for (s, e, v), (_, _, nxt) in zip(segments[:-1], segments[1:]):
+        if classes.get(v) == "rest" and e - s >= BREATH_MIN_PAUSE_S - _EPS and classes.get(nxt) != "rest":
+            out.append((max(s, e - duration), e, viseme))
+    return out
+
+
+def _weighted(segments, classes, params) -> List[Tuple[float, float, str, ClassTiming]]:
+    # Every segment with its class's constants, then the breaths with theirs.
+    out = [(s, e, v, params.of(classes.get(v, "other"))) for s, e, v in segments]
+    return out + [(s, e, v, params.breath) for s, e, v in breaths(segments, classes=classes, params=params)]
+
+
 def weights(segments: Sequence[Tuple[float, float, str]], times: np.ndarray, *, classes: Mapping[str, str],
             params: DominanceParams = DEFAULT_PARAMS) -> np.ndarray:
-    """Dominance of every segment at every time, ``(len(segments), len(times))``.
+    """Dominance of every segment, then of every breath (:func:`breaths`), at every time:
+    ``(len(segments) + len(breaths), len(times))``.
 
     Examples
     --------
@@ -400,9 +510,9 @@ def weights(segments: Sequence[Tuple[float, float, str]], times: np.ndarray, *, 
     ([True, False], True)
     """
     t = np.asarray(times, dtype=np.float64)
-    out = np.zeros((len(segments), len(t)))
-    for k, (s, e, v) in enumerate(segments):
-        ct = params.of(classes.get(v, "other"))
+    weighted = _weighted(segments, classes, params)
+    out = np.zeros((len(weighted), len(t)))
+    for k, (s, e, v, ct) in enumerate(weighted):
         out[k] = _segment_weight(s, e, ct, params.lead, t)
     return out
 
@@ -442,15 +552,13 @@ def dominance_frames(segments: Sequence[Tuple[float, float, str]], *, fps: float
     if stop <= first:
         return []
     closure_set = set(closures)
-    names = sorted({v for _, _, v in segments})   # a fixed order: ties break the same way everywhere
+    weighted = _weighted(segments, classes, params)
+    names = sorted({v for _, _, v, _ in weighted})   # a fixed order: ties break the same way everywhere
     index = {v: i for i, v in enumerate(names)}
     starts = np.array([s for s, _, _ in segments], dtype=np.float64)
-    ends = np.array([e for _, e, _ in segments], dtype=np.float64)
     lead = params.lead
-    reach_before = np.array([params.of(classes.get(v, "other")).anticipation for _, _, v in segments])
-    reach_after = np.array([params.of(classes.get(v, "other")).carryover for _, _, v in segments])
-    lo_t = starts - lead - reach_before      # a segment weighs on frames strictly after lo_t ...
-    hi_t = ends - lead + reach_after         # ... and strictly before hi_t
+    lo_t = np.array([s - lead - ct.anticipation for s, _, _, ct in weighted])  # weighs on frames after lo_t ...
+    hi_t = np.array([e - lead + ct.carryover for _, e, _, ct in weighted])     # ... and before hi_t
     specs: List[FrameSpec] = []
     for c0 in range(first, stop, _CHUNK):
         c1 = min(stop, c0 + _CHUNK)
@@ -458,12 +566,12 @@ def dominance_frames(segments: Sequence[Tuple[float, float, str]], *, fps: float
         w = np.zeros((len(names), c1 - c0))
         order = np.full((len(names), c1 - c0), np.inf)   # start of the earliest sound weighing, per viseme
         for k in np.nonzero((hi_t > t[0]) & (lo_t < t[-1]))[0]:
-            s, e, v = segments[k]
+            s, e, v, ct = weighted[k]
             a = max(int(math.floor((lo_t[k]) * fps)) - c0, 0)
             b = min(int(math.ceil((hi_t[k]) * fps)) + 1 - c0, c1 - c0)
             if b <= a:
                 continue
-            wk = _segment_weight(s, e, params.of(classes.get(v, "other")), lead, t[a:b])
+            wk = _segment_weight(s, e, ct, lead, t[a:b])
             i = index[v]
             w[i, a:b] += wk
             order[i, a:b] = np.where(wk > 0, np.minimum(order[i, a:b], s), order[i, a:b])
@@ -591,7 +699,17 @@ FIT_GROUPS: Tuple[Tuple[Tuple[str, str], ...], ...] = (
      ("other", "carryover")),
     # relaxing into and out of a pause
     (("rest", "anticipation"), ("rest", "carryover")),
+    # the breath before speech: how hard, how long, and its tails
+    (("breath", "dominance"),),
+    (("breath", "duration"),),
+    (("breath", "anticipation"), ("breath", "carryover")),
 )
+
+#: The live look-ahead :func:`fit` may not exceed: the rule-based sequencer's (380 ms,
+#: :data:`lipsync.live.causal.LOOKAHEAD_S`), which apps streaming TTS events are built around.
+#: Only the breath reaches that far (the longest anticipation of a sound is 115 ms), so the
+#: fit shortens the breath's full-dominance stretch to stay within it.
+FIT_MAX_LOOKAHEAD_S = 0.38
 
 
 #: Dominances :func:`fit` may choose, relative to an open vowel's 1. A class pulling much
@@ -624,6 +742,8 @@ def _from_vector(x: np.ndarray, base: DominanceParams) -> DominanceParams:
                 data[cls]["dominance"] = float(np.clip(math.exp(value), *FIT_DOMINANCE_RANGE))
             else:
                 data[cls][key] = float(np.clip(math.exp(min(value, 5.0)), 0.0, 0.3))
+    b = data["breath"]
+    b["duration"] = min(b["duration"], max(0.0, FIT_MAX_LOOKAHEAD_S - data["lead"] - b["anticipation"]))
     return DominanceParams.model_validate(data)
 
 
@@ -799,15 +919,16 @@ def rounded(params: DominanceParams) -> dict:
 
     Examples
     --------
-    >>> rounded(DEFAULT_PARAMS)["rounded"]
-    {'dominance': 0.96, 'anticipation': 0.115, 'carryover': 0.073}
+    >>> rounded(DEFAULT_PARAMS)["breath"]
+    {'dominance': 1.4, 'anticipation': 0.109, 'carryover': 0.109, 'duration': 0.258}
     """
     def sig(x: float) -> float:
         return float(f"{x:.2g}")
 
     out: dict = {"lead": round(params.lead, 3)}
-    for c in CLASSES:
+    for c in CLASSES + ("breath",):
         t = params.of(c)
         out[c] = {"dominance": sig(t.dominance), "anticipation": round(t.anticipation, 3),
                   "carryover": round(t.carryover, 3)}
+    out["breath"]["duration"] = round(params.breath.duration, 3)
     return out

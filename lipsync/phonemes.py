@@ -5,8 +5,10 @@
 * ``configs/maps/<name>.yaml`` — a :class:`PhonemeMap` (DESIGN.md's format): ``silence``
   and ``fallback`` visemes, ``map`` from phone to a viseme or a list of visemes (a list
   splits the phone's time evenly: diphthongs), optional ``closures`` (visemes that must be
-  reached fully even when short), ``aliases`` (other names of each viseme, e.g. the
-  Preston Blair names of Rhubarb's shapes) and ``phoneset``.
+  reached fully even when short), ``breath`` (the viseme of parted lips drawing breath
+  before speech, which the ``dominance`` timing model shows ahead of speech after a
+  pause), ``aliases`` (other names of each viseme, e.g. the Preston Blair names of
+  Rhubarb's shapes) and ``phoneset``.
 
 A label is looked up in this order: as written in ``map``; as a silence label (of the
 phone set, case-insensitive); through the phone set to its canonical phone; upper-cased.
@@ -131,6 +133,7 @@ class PhonemeMap(BaseModel):
     fallback: str
     map: Dict[str, Union[str, List[str]]]
     closures: List[str] = Field(default_factory=list)
+    breath: Optional[str] = None
     aliases: Dict[str, List[str]] = Field(default_factory=dict)
     phoneset: Optional[str] = DEFAULT_PHONESET
 
@@ -156,6 +159,8 @@ class PhonemeMap(BaseModel):
         bad = [c for c in self.closures if c not in known]
         if bad:
             raise ValueError(f"closures name visemes the map never uses: {', '.join(bad)}")
+        if self.breath is not None and self.breath not in known:
+            raise ValueError(f"breath names a viseme the map never uses: {self.breath}")
         bad = [v for v in self.aliases if v not in known]
         if bad:
             raise ValueError(f"aliases given for visemes the map never uses: {', '.join(bad)}")
@@ -203,6 +208,7 @@ class PhonemeMap(BaseModel):
             silence=r(self.silence), fallback=r(self.fallback),
             map={k: (r(t) if isinstance(t, str) else [r(x) for x in t]) for k, t in self.map.items()},
             closures=[r(c) for c in self.closures],
+            breath=None if self.breath is None else r(self.breath),
             aliases={r(k): v for k, v in self.aliases.items()}))
 
 

@@ -21,7 +21,8 @@ Figures (``python -m lipsync.bench --only NAME``):
 
 * ``coarticulation``: r and RMS error per measure, phone source and model; the refit of
   the constants from :data:`~lipsync.coarticulation.START_PARAMS` (how they were made);
-  the issue's own measure reproduced (a real trajectory smoothed over ~2 frames);
+  what the breath before speech adds (``coarticulation_breath``: the same model without
+  it); the issue's own measure reproduced (a real trajectory smoothed over ~2 frames);
   closures (share of P/B/M frames shown closed) and labiodentals (F/V frames where the G
   viseme is at least half the blend); what projecting the dominance blend onto two visemes
   costs; the live look-ahead bound and what real timelines need; on the drawn toon: held
@@ -98,13 +99,18 @@ def ideal_bank(clips, source: str, measure: str = "opening", pmap=None) -> Dict[
     return out
 
 
-def schedules(visemes, n: int, *, pmap=None, params=None, models=MODELS, fps: float = FPS) -> Dict[str, list]:
-    """FrameSpecs of ``n`` frames of a viseme track for each timing model."""
-    from ..coarticulation import DEFAULT_PARAMS, viseme_classes
+def schedules(visemes, n: int, *, pmap=None, params=None, models=MODELS, fps: float = FPS,
+              breath: bool = True) -> Dict[str, list]:
+    """FrameSpecs of ``n`` frames of a viseme track for each timing model (``breath=False``:
+    the dominance model without the breath before speech)."""
+    from ..coarticulation import DEFAULT_PARAMS, VisemeClasses, viseme_classes
     from ..sequencer import sequence
 
     pmap = pmap or _pmap()
     rest, closures = pmap.silence, pmap.closures
+    classes = viseme_classes(pmap)
+    if not breath:
+        classes = VisemeClasses(classes, breath=None)
     out = {}
     for m in models:
         if m == "today":
@@ -113,7 +119,7 @@ def schedules(visemes, n: int, *, pmap=None, params=None, models=MODELS, fps: fl
             out[m] = sequence(visemes, fps=fps, rest=rest, closures=closures, duration=n / fps, max_transition=0.0)
         else:
             out[m] = sequence(visemes, fps=fps, rest=rest, closures=closures, duration=n / fps,
-                              timing=params or DEFAULT_PARAMS, classes=viseme_classes(pmap))
+                              timing=params or DEFAULT_PARAMS, classes=classes)
     return out
 
 
@@ -124,7 +130,8 @@ def _smooth(x: np.ndarray, sigma: float) -> np.ndarray:
     return np.convolve(np.pad(x, len(k) // 2, mode="edge"), g, mode="valid")
 
 
-def _scores(clips, source: str, measure: str, values, *, params=None, sigma: float = 0.0, pmap=None):
+def _scores(clips, source: str, measure: str, values, *, params=None, sigma: float = 0.0, pmap=None,
+            breath: bool = True):
     """Per model: list of (clip, r, rmse)."""
     from ..coarticulation import predicted
 
@@ -133,7 +140,7 @@ def _scores(clips, source: str, measure: str, values, *, params=None, sigma: flo
         real = G.real_measures(c)[measure]
         if sigma:
             real = _smooth(real, sigma)
-        sch = schedules(viseme_track(c, source, pmap), len(real), pmap=pmap, params=params)
+        sch = schedules(viseme_track(c, source, pmap), len(real), pmap=pmap, params=params, breath=breath)
         for m, specs in sch.items():
             pred = predicted(specs, values)
             ok = np.isfinite(real)
@@ -161,14 +168,15 @@ def _refit(source: str, values, pmap):
 
 
 def _short(params) -> str:
-    """The constants on one line: lead, then class: dominance/anticipation ms/carry-over ms."""
+    """The constants on one line: lead, then class: dominance/anticipation ms/carry-over ms,
+    and the breath's length."""
     from ..coarticulation import CLASSES
 
     parts = [f"lead {1000 * params.lead:.0f} ms"]
-    for c in CLASSES:
+    for c in CLASSES + ("breath",):
         t = params.of(c)
         parts.append(f"{c} {t.dominance:.2g}/{1000 * t.anticipation:.0f}/{1000 * t.carryover:.0f}")
-    return ", ".join(parts)
+    return ", ".join(parts) + f", breath {1000 * params.breath.duration:.0f} ms before speech"
 
 
 def _closures(clips, source: str, pmap) -> List[dict]:
@@ -210,8 +218,9 @@ def _projection(clips, source: str, values, pmap) -> dict:
         n = len(real)
         segs = co.plan(viseme_track(c, source, pmap), rest=pmap.silence, closures=pmap.closures, duration=n / FPS)
         w = co.weights(segs, np.arange(n) / FPS, classes=classes)
-        names = sorted({v for _, _, v in segs})
-        agg = np.array([w[[k for k, s in enumerate(segs) if s[2] == v]].sum(axis=0) for v in names])
+        weighed = segs + co.breaths(segs, classes=classes)    # the rows of w
+        names = sorted({v for _, _, v in weighed})
+        agg = np.array([w[[k for k, s in enumerate(weighed) if s[2] == v]].sum(axis=0) for v in names])
         agg = agg / agg.sum(axis=0)
         blend = (agg * np.array([values[v] for v in names])[:, None]).sum(axis=0)
         # closures forced as the model does
@@ -340,6 +349,13 @@ def figure(ctx: Context, rows: List[dict]) -> None:
                      "r bank clips": _mean(b["dominance"]), "rmse held-out": _mean(h["dominance"], 2),
                      "fit CPU s": round(cpu, 1), "look-ahead ms": round(1000 * co.lookahead(params)),
                      "constants": _short(params)})
+        with_breath = _scores(held, source, "opening", values_opening, pmap=pmap)["dominance"]
+        without = _scores(held, source, "opening", values_opening, pmap=pmap, breath=False)["dominance"]
+        rows.append({"figure": "coarticulation_breath", "phones": source, "measure": "opening",
+                     "r held-out, dominance": _mean(with_breath), "r held-out, without the breath": _mean(without),
+                     "clips better with it": f"{sum(a[1] > b[1] for a, b in zip(with_breath, without))}/{len(without)}",
+                     "look-ahead ms": round(1000 * co.lookahead()),
+                     "without the breath ms": round(1000 * co.lookahead(breath=False))})
         s = _scores(held, source, "opening", ideal_bank(G.BANK_CLIPS, source, "opening", pmap),
                     sigma=ISSUE_SMOOTHING_FRAMES, pmap=pmap)
         for m in MODELS:

@@ -79,7 +79,8 @@ class LiveAnimator:
         Seconds of pushed data past a frame's time after which the frame counts as final
         (:attr:`final_until`, :meth:`is_final`); default: the bound the timing implies,
         :data:`LOOKAHEAD_S` (0.38 s) for the sequencer's rules,
-        :func:`lipsync.coarticulation.lookahead` (0.177 s with the default constants) for
+        :func:`lipsync.coarticulation.lookahead` (0.38 s with the default constants and a map with
+        a breath viseme, 0.194 s without one) for
         the dominance model. It does not change which frame is shown.
     store : FlowStore, optional
         Flow store (default: the bank's).

@@ -49,12 +49,15 @@ The dominance model
 With ``timing="dominance"`` (:mod:`lipsync.coarticulation`) the same window is planned with
 the model instead of rules 3-7. A sound starting at ``s`` weighs on frames after
 ``s - lead - anticipation`` only, and on nothing later than its end plus its carry-over, so:
-the look-ahead is ``lead + the longest anticipation`` (:func:`lipsync.coarticulation.lookahead`,
-177 ms with the default constants), and a cut at ``c`` inside ``G`` is valid once the
-carry-over of every sound before ``G`` has ended (``c >= G.start + carry-over - lead``, and
-at least a frame in, for a closure's forced frame) and while no sound after ``G`` reaches
-back to it (``G.end - c >= look-ahead``): with the defaults, inside pauses and sounds of
-330 ms or more. No sound is dropped or held, so nothing else reaches across ``G``.
+the look-ahead is ``lead + the longest anticipation`` (:func:`lipsync.coarticulation.lookahead`),
+where the breath before speech reaches furthest: 380 ms with the default constants and a
+map with a breath viseme (194 ms without one). A cut at ``c`` inside ``G`` is valid once
+the carry-over of every sound before ``G`` has ended (``c >= G.start + carry-over - lead``,
+and at least a frame in, for a closure's forced frame) and while no sound after ``G``
+reaches back to it (``G.end - c >= look-ahead``), which also leaves a cut pause at least
+:data:`~lipsync.coarticulation.BREATH_MIN_PAUSE_S` long, so it ends in the same breath as
+the whole pause: with the defaults, inside pauses and sounds of 550 ms or more. No sound
+is dropped or held, so nothing else reaches across ``G``.
 
 Examples
 --------
@@ -128,11 +131,13 @@ class CausalSequencer:
             self.params = co.as_params(timing)
             self.curve = None
             self.classes = classes
+            breath = getattr(classes, "breath", None) is not None
             #: Seconds of data past a frame that decide it (module docstring).
-            self.lookahead = co.lookahead(self.params)
+            self.lookahead = co.lookahead(self.params, breath=breath)
             self._lead = max(co.carryover(self.params), 1.0 / self.fps)
-            # frames before the cut are frozen when G is pushed: no sound after G may reach them
-            self._tail = max(self.lookahead, 1.0 / self.fps)
+            # frames before the cut are frozen when G is pushed: no sound after G may reach
+            # them; and a pause cut keeps enough of itself to end in the same breath
+            self._tail = max(self.lookahead, 1.0 / self.fps, co.BREATH_MIN_PAUSE_S if breath else 0.0)
             self._relax_s = max(RELAX_S, co.carryover(self.params))
         else:
             self.curve = get_curve(timing)

@@ -175,7 +175,7 @@ def write_cues(cues: Union[Timeline, Sequence[Cue]], path: PathLike, format: Opt
     track, total = cue_track(cues, rest=rest, duration=duration)
     options = CueOptions(duration=total, rest=rest, fps=float(fps), tier=tier, sound_file=sound_file,
                          names=dict(names or {}), closures=frozenset(closures), timing=timing, timeline=timeline,
-                         classes=dict(classes) if classes is not None else None, atlas=atlas,
+                         classes=_copy_classes(classes), atlas=atlas,
                          output=os.fspath(path))
     text = writer.render(track, options)
     data = text.encode("utf-8")
@@ -185,3 +185,13 @@ def write_cues(cues: Union[Timeline, Sequence[Cue]], path: PathLike, format: Opt
 
 # Each writer module registers itself in WRITERS (lipsync.writers.base).
 from . import rhubarb, moho, textgrid, audacity, atlas  # noqa: E402,F401  (registration order = --format choices)
+
+
+def _copy_classes(classes):
+    # A copy the caller cannot change under the writer; a map's VisemeClasses keeps its
+    # breath viseme (the dominance model shows it before speech).
+    if classes is None:
+        return None
+    from ..coarticulation import VisemeClasses
+
+    return VisemeClasses(classes, breath=getattr(classes, "breath", None))
