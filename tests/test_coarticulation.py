@@ -361,6 +361,18 @@ def test_bank_yaml_timing_and_fitted_constants_are_used(tmp_path):
     assert live.lookahead == pytest.approx(0.05 + max(0.25, p.duration + p.anticipation))
 
 
+def test_a_bank_can_turn_the_breath_off(tmp_path):
+    # An app that cannot wait 380 ms: bank.yaml sets the breath's length to 0.
+    b = Bank.load(_bank_with(tmp_path, "timing: dominance\ncoarticulation: {breath: {duration: 0}}"))
+    tl = vt((0, 0.2, "C"), (0.2, 1.0, "X"), (1.0, 1.6, "D"), end=2.0)
+    assert not any("B" in (f.from_viseme, f.to_viseme) for f in Animator(b, tl, fps=25).specs)
+    assert any(_share(f, "B") > 0.5 for f in Animator(Bank.load(default_bank_dir()), tl, fps=25,
+                                                           timing="dominance").specs)
+    live = LiveAnimator(b, fps=25, prepare=False)
+    assert live.lookahead == pytest.approx(co.lookahead(co.DEFAULT_PARAMS, breath=False))
+    assert live.lookahead < 0.2
+
+
 @pytest.mark.parametrize("text,needle", [
     ("timing: wobbly", "timing: Value error, unknown timing 'wobbly'; valid: linear"),
     ("coarticulation: {lead: 0.5}", "coarticulation.lead: Input should be less than or equal to 0.1"),
