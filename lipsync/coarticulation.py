@@ -677,10 +677,11 @@ def dominance_sequence(visemes: Timeline, *, fps: float, rest: str, closures: It
 
 # --- fitting ------------------------------------------------------------------------------
 
-#: The constants :func:`fit` adjusts, each group sharing one value (10 in all). With about 30 s
-#: of one speaker's video, letting all 18 go free fitted the dev sentences better (r 0.737
-#: against 0.694) and the held-out ones no better (0.721 against 0.723), and pushed two
-#: anticipations to their 300 ms bound: a 310 ms live look-ahead instead of 180 ms.
+#: The constants :func:`fit` adjusts, each group sharing one value (13 in all: 10 for the
+#: classes, 3 for the breath before speech). With about 30 s of one speaker's video, letting
+#: the 18 class constants go free fitted the dev sentences better (r 0.737 against 0.694,
+#: before the breath) and the held-out ones no better (0.721 against 0.723), and pushed two
+#: anticipations to their 300 ms bound.
 #: The open vowels' dominance is the unit (only ratios matter), so it is not fitted.
 FIT_GROUPS: Tuple[Tuple[Tuple[str, str], ...], ...] = (
     (("lead", ""),),
