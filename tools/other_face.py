@@ -1,15 +1,22 @@
 """A subject from a video of someone other than GRID's speaker, and what happens to it.
 
 Issue 17 asks what ``lipsync init --video`` does with faces unlike the dev speaker, on
-openly licensed footage only. The one such clip found here is Debian's
-``forensics-samples-files`` ``movie-hello.mp4`` (CC BY-SA 4.0, Joao Eriberto Mota Filho): a
-screencast with the speaker's webcam in a corner (glasses, a headset, backlit, looking down
-at the keyboard at times, about 44 px between the eyes). Nothing of it is shipped; fetch it
-with::
+openly licensed footage only. Two such clips were found in
+Debian packages (nothing of them is shipped here):
 
-    apt-get download forensics-samples-files && dpkg -x forensics-samples-files_*.deb pkg
+* ``forensics-samples-files``' ``movie-hello.mp4`` (CC BY-SA 4.0, Joao Eriberto Mota Filho):
+  a screencast with the speaker's webcam in a corner (glasses, a headset, backlit, looking
+  down at the keyboard at times, about 44 px between the eyes);
+* ``kphotoalbum``'s ``demo/movie.avi`` (GPL-2+, the KPhotoAlbum authors): a man with glasses
+  introducing himself to a webcam, 160x120 at 15 fps, 4.5 s.
+
+Fetch and run them with::
+
+    apt-get download forensics-samples-files kphotoalbum
+    dpkg -x forensics-samples-files_*.deb pkg && dpkg -x kphotoalbum_*.deb pkg
     python tools/other_face.py pkg/usr/share/forensics-samples/original-files/movie2/movie-hello.mp4 \\
         --crop 252:190:113:84
+    python tools/other_face.py pkg/usr/share/kphotoalbum/demo/movie.avi
 
 The script crops the webcam (``--crop W:H:X:Y``, ffmpeg's order), makes a bank with
 ``lipsync init --video`` (words recognised: no transcript comes with the clip), renders

@@ -100,6 +100,15 @@ class Pictures:
 #: fitting them to the speaker (lipsync.coarticulation.fit_speaker) measured no better there.
 TIMING = "dominance"
 
+#: Median stabilisation residual (eye distances) of the chosen frames above which the head
+#: moved too much between them: GRID s1's chosen frames measure 0.003-0.017 (median 0.006);
+#: a webcam speaker looking down at a keyboard now and then (tools/other_face.py, Debian's
+#: movie-hello.mp4) median 0.07, and the rendered eyes then step by 0.1 eye distances a frame
+#: (p95; GRID 0.01); kphotoalbum's demo clip of a speaker facing the camera, no warning. This
+#: is the residual select.RESIDUAL_SCALE prices as one typical spread of mouth shapes (the
+#: head turned about 3 degrees).
+MOVED_RESIDUAL = 0.03
+
 
 def _viseme_order(pmap) -> List[str]:
     """The map's visemes in its naming system's order (the toon's A..H, X), else sorted, rest last."""
@@ -187,7 +196,8 @@ def make_bank(outdir: PathLike, videos: Sequence[PathLike], *, text: Optional[st
     t = time.perf_counter()
     ranked = select.rank(_candidates(footage, pmap.silence),
                          [select.FrameMeasures.of(tr.points, tr.fps, reg.residual)
-                          for tr, reg in zip(footage.tracks, footage.regs)])
+                          for tr, reg in zip(footage.tracks, footage.regs)],
+                         closures=pmap.closures)
     if pmap.silence not in ranked:
         raise InputError(f"no face in the pauses to take the rest shape ({pmap.silence}) from", path=footage.names)
     seconds["select"] = time.perf_counter() - t
@@ -315,6 +325,12 @@ def assemble(outdir: Path, footage: Footage, ranked: Dict[str, List[Candidate]],
                       f"shown ({', '.join(f'{v} <- {u}' for v, u in missing.items())}). Record these sounds too "
                       f"(reading samples/record-script.txt aloud shows every shape)", UserWarning, stacklevel=3)
     source_of = {v: chosen[v] if v in chosen else chosen[missing[v]] for v in order}
+    moved = float(np.median([c.residual for c in chosen.values()]))
+    if moved > MOVED_RESIDUAL:
+        warnings.warn(f"{names}: the head turns or nods between the chosen frames (their still points disagree "
+                      f"by {moved:.2f} eye distances, against {MOVED_RESIDUAL:g} at most on a still speaker); the "
+                      f"rendered head will wobble. Record facing the camera with the head still, or more of it "
+                      f"to choose from", UserWarning, stacklevel=3)
 
     # the chosen pictures matched on the still skin
     keys = list(pictures.images)

@@ -16,8 +16,9 @@ begins and settle after it ends).
   two open vowels is more open than one between closures); the most typical is the one
   that stands for the viseme best wherever the renderer shows it;
 * *typical opening* — the frame's lip opening (:func:`lipsync.face.measure.lip_opening`)
-  against the candidates' median, over their median absolute deviation
-  (:data:`OPENING_WEIGHT`);
+  against the candidates' median (for a closure, a low percentile of them: its picture must
+  show closed lips, :data:`CLOSURE_OPENING_PERCENTILE`), over their median absolute
+  deviation (:data:`OPENING_WEIGHT`);
 * *steady lips* — the lips' speed (eye distances per second) over :data:`MOTION_SCALE`:
   a frame between two shapes is blurred and not any viseme;
 * *eyes open* — a blink is never chosen (:data:`BLINK_BELOW`), half-closed eyes cost;
@@ -77,6 +78,15 @@ MOTION_SCALE = 2.0
 #: over the held-out sentences, follow the real lips as well as the per-viseme medians do
 #: (r = 0.686 against 0.661 without; weights of 2 and more change nothing further).
 OPENING_WEIGHT = 1.0
+#: A closure's (P, B, M: the map's ``closures``) opening is judged against this percentile of
+#: its candidates' openings, not their median: closed lips are what the picture must show
+#: (the renderer shows it on every frame inside a P, B or M). At 25 fps with good
+#: alignment most of a closure's middle frames are closed and the median is too (GRID s1:
+#: the same frame either way); at 15 fps, or an aligner a frame off, the middle of a 60-90 ms
+#: closure holds the lips parting, and the median chose a picture more open than the
+#: slightly-open B (kphotoalbum's demo webcam clip, tools/other_face.py: 0.049 against 0.044
+#: eye distances).
+CLOSURE_OPENING_PERCENTILE = 10
 #: A frame at half the sharpness of the viseme's sharpest finalist costs half a spread.
 SHARPNESS_WEIGHT = 1.0
 #: Eyes half as open as usual (but not a blink) cost this much.
@@ -208,9 +218,11 @@ class FrameMeasures:
                    eyes=eyes / np.nanmedian(eyes), residual=np.asarray(residual, np.float64))
 
 
-def rank(cands: Sequence[Candidate], measures: Sequence[FrameMeasures]) -> Dict[str, List[Candidate]]:
+def rank(cands: Sequence[Candidate], measures: Sequence[FrameMeasures], *,
+         closures: Sequence[str] = ()) -> Dict[str, List[Candidate]]:
     """Candidates scored and sorted best first, per viseme (blinks left out when a viseme has
-    other candidates)."""
+    other candidates). ``closures``: visemes whose pictures must show closed lips
+    (:data:`CLOSURE_OPENING_PERCENTILE`)."""
     by: Dict[str, List[Candidate]] = {}
     for c in cands:
         by.setdefault(c.viseme, []).append(c)
@@ -220,8 +232,10 @@ def rank(cands: Sequence[Candidate], measures: Sequence[FrameMeasures]) -> Dict[
         dist = np.linalg.norm(shapes - np.median(shapes, axis=0), axis=1)
         typ = dist / max(float(np.median(dist)), 1e-9)
         opening = np.array([measures[c.video].opening[c.frame] for c in group])
-        mid = float(np.median(opening))
-        mad = max(float(np.median(np.abs(opening - mid))), 1e-6)
+        # a closure: an opening one of its candidates has (the lowest of a few, a low one of many)
+        mid = float(np.percentile(opening, CLOSURE_OPENING_PERCENTILE, method="lower") if v in closures
+                    else np.median(opening))
+        mad = max(float(np.median(np.abs(opening - np.median(opening)))), 1e-6)
         scored = []
         for c, t, o in zip(group, typ, opening):
             m = measures[c.video]
