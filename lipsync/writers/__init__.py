@@ -183,10 +183,6 @@ def write_cues(cues: Union[Timeline, Sequence[Cue]], path: PathLike, format: Opt
     return writer.name
 
 
-# Each writer module registers itself in WRITERS (lipsync.writers.base).
-from . import rhubarb, moho, textgrid, audacity, atlas  # noqa: E402,F401  (registration order = --format choices)
-
-
 def _copy_classes(classes):
     # A copy the caller cannot change under the writer; a map's VisemeClasses keeps its
     # breath viseme (the dominance model shows it before speech).
@@ -195,3 +191,7 @@ def _copy_classes(classes):
     from ..coarticulation import VisemeClasses
 
     return VisemeClasses(classes, breath=getattr(classes, "breath", None))
+
+
+# Each writer module registers itself in WRITERS (lipsync.writers.base).
+from . import rhubarb, moho, textgrid, audacity, atlas  # noqa: E402,F401  (registration order = --format choices)
