@@ -343,7 +343,7 @@ def figure(ctx: Context, rows: List[dict]) -> None:
             if measure == "opening":
                 if source == "align":
                     clip_rows = h
-                values_opening = values
+                values_opening, held_opening = values, h
         params, cpu = _refit(source, values_opening, pmap)
         h = _scores(held, source, "opening", values_opening, params=params, pmap=pmap)
         b = _scores(G.BANK_CLIPS, source, "opening", values_opening, params=params, pmap=pmap)
@@ -352,7 +352,7 @@ def figure(ctx: Context, rows: List[dict]) -> None:
                      "r bank clips": _mean(b["dominance"]), "rmse held-out": _mean(h["dominance"], 2),
                      "fit CPU s": round(cpu, 1), "look-ahead ms": round(1000 * co.lookahead(params)),
                      "constants": _short(params)})
-        with_breath = _scores(held, source, "opening", values_opening, pmap=pmap)["dominance"]
+        with_breath = held_opening["dominance"]
         without = _scores(held, source, "opening", values_opening, pmap=pmap, breath=False)["dominance"]
         rows.append({"figure": "coarticulation_breath", "phones": source, "measure": "opening",
                      "r held-out, dominance": _mean(with_breath), "r held-out, without the breath": _mean(without),

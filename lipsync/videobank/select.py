@@ -232,10 +232,10 @@ def rank(cands: Sequence[Candidate], measures: Sequence[FrameMeasures], *,
         dist = np.linalg.norm(shapes - np.median(shapes, axis=0), axis=1)
         typ = dist / max(float(np.median(dist)), 1e-9)
         opening = np.array([measures[c.video].opening[c.frame] for c in group])
+        median = float(np.median(opening))
+        mad = max(float(np.median(np.abs(opening - median))), 1e-6)
         # a closure: an opening one of its candidates has (the lowest of a few, a low one of many)
-        mid = float(np.percentile(opening, CLOSURE_OPENING_PERCENTILE, method="lower") if v in closures
-                    else np.median(opening))
-        mad = max(float(np.median(np.abs(opening - np.median(opening)))), 1e-6)
+        mid = float(np.percentile(opening, CLOSURE_OPENING_PERCENTILE, method="lower")) if v in closures else median
         scored = []
         for c, t, o in zip(group, typ, opening):
             m = measures[c.video]
