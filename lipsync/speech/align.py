@@ -64,7 +64,7 @@ __all__ = ["Alignment", "align", "align_samples", "AlignmentWarning", "MissingWo
            "read_transcript", "VERSION"]
 
 #: Bumped when alignment results change (part of any cache key).
-VERSION = 2
+VERSION = 3
 
 #: pocketsphinx's frame shift (its -frate is 100 frames per second).
 FRAME_S = 0.01
@@ -98,9 +98,9 @@ BOUNDARY_OFFSET_S = 0.0
 LOW_CONFIDENCE = 0.5
 #: Below this acoustic fit (:func:`_acoustic_fit`) a transcript whose words all aligned is
 #: taken as not what was said, and the relaxed search looks for the words that are there.
-#: A fit of 0.2 is a score 6 units a frame below :data:`FIT_LLR_CENTRE` (2.5 below the free
-#: phone loop's); the 40 GRID sentences with their own transcripts measured 6.6 to 23 above
-#: the loop (fit 0.66 to 1), the MFA recording 11.2, the espeak samples 14.6 and 21.
+#: A fit of 0.2 is a score 6 units a frame below :data:`FIT_LLR_CENTRE` (17 below the free
+#: phone loop's); the 40 GRID sentences with their own transcripts measured -8.9 to 4.5
+#: against the loop (fit 0.6 to 1), the MFA recording -2.0, the espeak samples -4.9 and -0.5.
 NOT_FIT_CONFIDENCE = 0.2
 #: Share of a long transcript's words that may go unfound without a warning.
 SKIPPED_SHARE_OK = 0.08
@@ -199,15 +199,8 @@ class Alignment:
 #:   letter names as said outside the US).
 ALIGNER_SETTINGS = dict(topn=8, bestpath=False, fsgusealtpron=False)
 
-#: The phones of the free phone loop (:func:`_phone_loop_scores`): ARPAbet's 39.
-LOOP_PHONES = ("AA AE AH AO AW AY B CH D DH EH ER EY F G HH IH IY JH K L M N NG OW OY P R S SH T "
-               "TH UH UW V W Y Z ZH").split()
-#: Probability of each further phone in the free loop (a phone insertion penalty). The fit
-#: measure hardly depends on it: on the GRID sentences 0.5, 0.05 and 0.005 gave the same
-#: order of right and wrong transcripts (lowest right 2.9, 2.8, 3.0 units a frame).
-LOOP_PHONE_PROB = 0.05
-# Dictionary names of the loop's one-phone words: "_" never occurs in a normalised word.
-_LOOP_WORD = "ph_{}"
+#: Name of the fit check's free phone recogniser in the aligner (:func:`_phone_loop_scores`).
+_LOOP = "loop"
 
 
 @functools.lru_cache(maxsize=1)
@@ -215,12 +208,12 @@ def _aligner():
     from pocketsphinx import Decoder
 
     d = Decoder(lm=None, loglevel="FATAL", **ALIGNER_SETTINGS)
-    for p in LOOP_PHONES:
-        d.add_word(_LOOP_WORD.format(p.lower()), p, False)
-    loop = [(0, 0, LOOP_PHONE_PROB, _LOOP_WORD.format(p.lower())) for p in LOOP_PHONES]
-    # one state that starts and ends the grammar: no null transition, whose "(NULL)"
-    # segment the phone pass could not align
-    d.add_fsg("loop", d.create_fsg("loop", 0, 0, loop))
+    # pocketsphinx's phone recogniser with no phone language model: any context-independent
+    # phone may follow any other (allphone_ci is pocketsphinx's default). Until issue 20's
+    # third round the loop was a grammar of the 39 one-phone words, whose cross-word
+    # triphones cost 47 ms of CPU per second of audio against 29 for this, and separated
+    # right from wrong transcripts no better (see FIT_LLR_CENTRE).
+    d.add_allphone_file(_LOOP, None)
     return d
 
 
@@ -407,16 +400,16 @@ def _force_align(pcm: np.ndarray, words: Sequence[str]) -> Optional[_Forced]:
 def _phone_loop_scores(pcm: np.ndarray) -> Optional[np.ndarray]:
     """Acoustic score of every 10 ms frame on the best path of a free phone loop.
 
-    Any phone may follow any other (:data:`LOOP_PHONES`, :data:`LOOP_PHONE_PROB`), with
-    silence and noise between: what the audio holds with no transcript at all. Scored by
-    the search itself, like the transcript's grammar search in :func:`_force_align`, so the
-    two compare frame by frame. (Until issue 20's second round both were re-scored by a
-    state-level pass; for the loop that pass cost 40% of the fit check and, measured on the
-    GRID sentences, separated right from wrong transcripts no better: see FIT_LLR_SPAN.)
+    Any context-independent phone may follow any other, with silence and noise between:
+    what the audio holds with no transcript at all. Scored by the search itself, like the
+    transcript's grammar search in :func:`_force_align`, so the two compare frame by frame.
+    (Until issue 20's second round both were re-scored by a state-level pass; for the loop
+    that pass cost 40% of the fit check and, measured on the GRID sentences, separated right
+    from wrong transcripts no better.)
     """
     d = _aligner()
     try:
-        d.activate_search("loop")
+        d.activate_search(_LOOP)
         _decode(d, pcm)
         if d.hyp() is None:
             return None
@@ -427,24 +420,27 @@ def _phone_loop_scores(pcm: np.ndarray) -> Optional[np.ndarray]:
 
 #: Scale of :func:`_acoustic_fit`: a transcript whose sounds score this many units a frame
 #: (pocketsphinx's log scale) above :data:`FIT_LLR_CENTRE` fits at 1, as many below at 0.
-#: Measured on the 40 GRID sentences (issue 20, search scores): with their own transcripts
-#: the words scored 6.6 to 23 above the loop (median 16), with another sentence's
-#: transcript mostly far below (-40), the highest four 3.4 to 5.1.
+#: Measured on the 40 GRID sentences (issue 20, third round): with their own transcripts the
+#: words scored -8.9 to 4.5 against the free phone loop (median -0.3), with another
+#: sentence's transcript -44 to -10.5 (median -25).
 FIT_LLR_SPAN = 10.0
-#: Score a frame above the free phone loop at which a transcript fits at 0.5. Both scores
-#: come from searches (issue 20, second round: the loop's state pass cost 40% of the fit
-#: check); the transcript's grammar search normalises its scores against fewer competing
-#: senones than the loop's, so it comes out above the state-pass comparison used before by
-#: 2.4 (MFA recording), 0.8 and 3.2 (espeak samples) and 2.8 (GRID median) units a frame.
-#: 3.5 keeps the GRID detection where it was (116 of 120 wrong transcripts below 0.5; 3 gave
-#: 115, 4 gave 117) with right transcripts as far above the middle as before or about:
-#: lowest GRID sentence 3.1 (was 2.8), MFA recording 7.7 (was 8.8).
-FIT_LLR_CENTRE = 3.5
+#: Score a frame against the free phone loop at which a transcript fits at 0.5: halfway
+#: between the lowest right transcript of the GRID sentences (-8.9) and the highest wrong
+#: one (-10.5), a little towards the wrong ones, since telling a user that the right
+#: transcript does not fit is the worse mistake. The loop's context-independent phones score
+#: about as well as the transcript's triphones, so a right transcript lands near 0. Measured
+#: on the cases of ``make bench``'s align-grid figure whose transcript aligned (issue 20,
+#: third round; the loop of one-phone words used before at its centre of 3.5 in brackets):
+#: below the centre 82 of 83 other sentences' transcripts (80), 3 of 40 with a letter left
+#: out (1), 11 of 18 with a word added (8), none of the 40 right ones (none); right ones at
+#: least 2.1 above it (3.1), the MFA recording 9.0 (7.7), the espeak samples 6.1 and 10.5
+#: (11.1 and 17.7).
+FIT_LLR_CENTRE = -11.0
 
 
 def _acoustic_fit(loop: Optional[np.ndarray], forced: Optional[_Forced],
                   speech: Optional[np.ndarray] = None) -> Optional[float]:
-    """How well the aligned transcript explains its audio, 0..1 (0.5: about as well as free phones).
+    """How well the aligned transcript explains its audio, 0..1 (0.5: :data:`FIT_LLR_CENTRE` below free phones).
 
     Two log likelihood ratios per frame of the transcript's grammar search against the free
     phone loop's (:func:`_phone_loop_scores`), each mapped linearly around
@@ -452,8 +448,9 @@ def _acoustic_fit(loop: Optional[np.ndarray], forced: Optional[_Forced],
     frames of the words (words forced onto other sounds score far worse than the loop),
     and over the ``speech`` frames, words and the silence and noise between them alike
     (speech the transcript leaves to silence scores far worse too). A transcript that was
-    said scores about as well as the loop or better: the loop pays for every phone it
-    inserts. None when a score is missing.
+    said scores about as well as the loop: its triphones are sharper models than the
+    loop's context-independent phones, but it may not choose its phones. None when a score
+    is missing.
     """
     if loop is None or forced is None or forced.frames is None or not forced.timings:
         return None
