@@ -285,3 +285,49 @@ def test_grid_words_stay_when_the_phone_pass_fails(monkeypatch):
     first = [p for p in al.phones if al.words[0].start <= p.start < al.words[0].end]
     assert [re.sub(r"\d", "", p.label) for p in first] == ["B", "IH", "N"]
     assert first[0].start == al.words[0].start and first[-1].end == al.words[0].end
+
+
+def _bram2n():
+    from lipsync.speech.audio import load_audio
+
+    name, audio, rows, words = next(s for s in grid_sentences() if s[0] == "bram2n")
+    return load_audio(audio), " ".join(words)
+
+
+def _same_alignment(a, b):
+    assert a.words == b.words and a.phones == b.phones
+    assert a.confidence == b.confidence and a.skipped == b.skipped
+
+
+def test_the_fit_check_decoded_in_a_worker_is_the_one_decoded_here():
+    # With two or more jobs the phone loop of the fit check runs in a forked worker beside
+    # the alignment (a second core: issue 20's speed); it must give exactly what it gives
+    # decoded in this process, and leave no process behind.
+    import multiprocessing
+
+    from lipsync.speech.align import AlignmentWarning, align_samples
+
+    pcm, text = _bram2n()
+    here = align_samples(pcm, text, jobs=1)
+    beside = align_samples(pcm, text, jobs=2)
+    _same_alignment(here, beside)
+    assert 0.6 <= here.confidence <= 1.0
+    assert multiprocessing.active_children() == []
+    # a wrong transcript takes the relaxed path, which asks the loop again
+    other = "lay green with g three soon"
+    with pytest.warns(AlignmentWarning):
+        wrong = [align_samples(pcm, other, jobs=jobs) for jobs in (1, 2)]
+    _same_alignment(*wrong)
+    assert wrong[0].confidence < 0.5
+
+
+def test_a_fit_check_worker_that_dies_is_replaced_by_decoding_here(monkeypatch):
+    import os as _os
+
+    import lipsync.speech.align as A
+
+    pcm, text = _bram2n()
+    here = A.align_samples(pcm, text, jobs=1)
+    # the worker is forked, so it runs this module's (patched) function
+    monkeypatch.setattr(A, "_loop_worker", lambda *args: _os._exit(3))
+    _same_alignment(here, A.align_samples(pcm, text, jobs=2))
