@@ -4,8 +4,9 @@ On the MFA corpus recording (``ctx.mfa/acoustic_corpus.wav``, 26.7 s of real spe
 
 1. speed as a multiple of real time, with the .lab transcript and without (recognition
    first), wall clock and CPU (this process and its workers), median of repeats; with the
-   transcript also the share of that CPU time the fit check's phone loop takes, and the
-   CPU speed and share with the loop of one-phone words it had before, in the same run;
+   transcript also whether the fit check's phone loop was asked (``loop_asked``), and the
+   speed with it asked whatever the words' own scores: beside the phone pass, in one
+   process (``jobs_1``), and with the loop of one-phone words it had before, in the same run;
 2. accuracy against MFA's own ``phones`` tier: share of MFA's phones matched (difflib's
    matching blocks of the labels), mean absolute boundary error of matched phones, and the share of
    10 ms frames showing the same Rhubarb mouth shape (both mapped with english-to-rhubarb);
@@ -32,6 +33,7 @@ GRID's own word alignments; without it, the few copied into tests/data), rows of
 
 from __future__ import annotations
 
+import contextlib
 import os
 import re
 import resource
@@ -133,22 +135,51 @@ def _word_loop_scores(pcm):
         return None
 
 
-def _fit_check_speed(pcm, transcript, seconds, cpu, repeat) -> dict:
-    """The fit check's share of the CPU time of an alignment with a transcript (issue 20),
-    and the speed with the loop of one-phone words it had before, side by side."""
+@contextlib.contextmanager
+def _loop_asks():
+    """A list that gets one item per alignment that asked the fit check's phone loop."""
     from ..speech import align as A
 
-    current = A._phone_loop_scores
-    _, _, loop_cpu = _timed(lambda: current(A._dither(pcm)), repeat)
-    _, _, old_loop_cpu = _timed(lambda: _word_loop_scores(A._dither(pcm)), repeat)
-    A._phone_loop_scores = _word_loop_scores
+    asked: list = []
+    original = A._PhoneLoop.start
+
+    def start(loop):
+        if not getattr(loop, "_bench_counted", False):
+            loop._bench_counted = True
+            asked.append(1)
+        return original(loop)
+
+    A._PhoneLoop.start = start
     try:
-        _, _, old_cpu = _timed(lambda: A.align_samples(pcm, transcript, quiet=True, jobs=os.cpu_count()), repeat)
+        yield asked
     finally:
-        A._phone_loop_scores = current
-    return {"fit_check_cpu_%": round(100 * loop_cpu / cpu),
-            "x_real_time_cpu_word_loop": round(seconds / old_cpu, 1),
-            "fit_check_cpu_%_word_loop": round(100 * old_loop_cpu / old_cpu)}
+        A._PhoneLoop.start = original
+
+
+def _fit_check_speed(pcm, transcript, seconds, repeat) -> dict:
+    """Speed with the fit check's phone loop asked whatever the words' own scores (as it is
+    for transcripts they leave in doubt, :data:`~lipsync.speech.align.FIT_WITHOUT_LOOP`):
+    today's loop beside the phone pass (wall and CPU), in this process only (``jobs=1``),
+    and the loop of one-phone words it had before, side by side (issue 20)."""
+    from ..speech import align as A
+
+    def run(jobs):
+        return lambda: A.align_samples(pcm, transcript, quiet=True, jobs=jobs)
+
+    saved, current = A.FIT_WITHOUT_LOOP, A._phone_loop_scores
+    A.FIT_WITHOUT_LOOP = float("inf")
+    try:
+        _, wall, cpu = _timed(run(os.cpu_count()), repeat)
+        _, wall1, _ = _timed(run(1), repeat)
+        A._phone_loop_scores = _word_loop_scores
+        _, old_wall, old_cpu = _timed(run(os.cpu_count()), repeat)
+    finally:
+        A.FIT_WITHOUT_LOOP, A._phone_loop_scores = saved, current
+    return {"loop_asked_x_real_time_wall": round(seconds / wall, 1),
+            "loop_asked_x_real_time_cpu": round(seconds / cpu, 1),
+            "loop_asked_x_real_time_wall_jobs_1": round(seconds / wall1, 1),
+            "word_loop_asked_x_real_time_wall": round(seconds / old_wall, 1),
+            "word_loop_asked_x_real_time_cpu": round(seconds / old_cpu, 1)}
 
 
 @FIGURES.decorator("align")
@@ -170,7 +201,9 @@ def _align(ctx: Context, rows: List[dict]) -> None:
         align_samples(pcm[:48000], text, quiet=True)
         align_samples(pcm[:48000], None, quiet=True)
         for name, transcript in (("with transcript", text), ("without transcript", None)):
-            al, wall, cpu = _timed(lambda: align_samples(pcm, transcript, quiet=True, jobs=os.cpu_count()), repeat)
+            with _loop_asks() as asked:
+                al, wall, cpu = _timed(lambda: align_samples(pcm, transcript, quiet=True, jobs=os.cpu_count()),
+                                       repeat)
             matched, mae, bias = boundary_stats(al.phones, ref)
             rows.append({"figure": "align", "case": f"MFA corpus {seconds:.1f} s, {name}",
                          "x_real_time_wall": round(seconds / wall, 1), "x_real_time_cpu": round(seconds / cpu, 1),
@@ -178,7 +211,8 @@ def _align(ctx: Context, rows: List[dict]) -> None:
                          "median_signed_ms": round(1000 * bias, 1),
                          "same_mouth_shape_frames_%": round(100 * frame_agreement(al.phones, ref, ref.duration), 1)})
             if transcript is not None:
-                rows[-1].update(_fit_check_speed(pcm, transcript, seconds, cpu, repeat))
+                rows[-1]["loop_asked"] = "yes" if asked else "no"
+                rows[-1].update(_fit_check_speed(pcm, transcript, seconds, repeat))
         samples = Path(__file__).resolve().parents[2] / "samples"
         for name in ("hello", "balloons"):
             if not (samples / f"{name}.wav").is_file():
@@ -288,7 +322,8 @@ def _align_grid(ctx: Context, rows: List[dict]) -> None:
     # 5. own transcripts
     same, confidences, errors, audio_s = 0, [], [], 0.0
     cpu0, wall0 = _cpu(), time.perf_counter()
-    results = [_grid_align(pcm, " ".join(words)) for _, pcm, _, words in sentences]
+    with _loop_asks() as asked:
+        results = [_grid_align(pcm, " ".join(words)) for _, pcm, _, words in sentences]
     cpu, wall = _cpu() - cpu0, time.perf_counter() - wall0
     for (name, pcm, ref, words), (al, warned) in zip(sentences, results):
         audio_s += len(pcm) / 16000
@@ -298,6 +333,7 @@ def _align_grid(ctx: Context, rows: List[dict]) -> None:
             errors += grid_boundaries(al.words, ref)
     row = {"figure": "align-grid", "case": f"GRID s1, {n} sentences, own transcripts",
            "transcript_words_back": f"{same}/{n}", "lowest_confidence": round(min(confidences), 2),
+           "loop_asked": f"{len(asked)}/{n}",
            "x_real_time_wall": round(audio_s / wall, 1), "x_real_time_cpu": round(audio_s / cpu, 1)}
     for where in ("between", "pause", None):
         e = np.abs([x for x, w in errors if where in (None, w)])

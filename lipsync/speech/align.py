@@ -158,7 +158,9 @@ class Alignment:
     confidence : float or None
         For a transcript, how well it fits the audio (0..1): the smallest of the share of
         its words found, the share of the speech they cover, and how well their sounds
-        match the audio against free phones (0.5: as well; :data:`LOW_CONFIDENCE`).
+        match the audio against free phones (:func:`_acoustic_fit`; asked only when the
+        words' own scores leave doubt, :data:`FIT_WITHOUT_LOOP`). Below
+        :data:`LOW_CONFIDENCE` the transcript is reported as not fitting.
     missing : tuple of str
         Transcript words that needed the letter-to-sound fallback.
     skipped : tuple of str
@@ -363,13 +365,15 @@ def _heard(decoder) -> List[Tuple[str, int, int]]:
     return out
 
 
-def _force_align(pcm: np.ndarray, words: Sequence[str]) -> Optional[_Forced]:
+def _force_align(pcm: np.ndarray, words: Sequence[str], searched=None) -> Optional[_Forced]:
     """Word and phone frames of ``words`` in ``pcm``, or None if the search finds no path.
 
     The grammar is exactly the words in order, each with its pronunciations, with
     pocketsphinx's silence and noise fillers allowed before, between and after them: it
     cannot return other words. If the phone pass fails after the words were found, the
-    words keep their times and share them evenly among their phones.
+    words keep their times and share them evenly among their phones. ``searched(frames,
+    in_words)``, if given, is called with the search's frame scores (:class:`_Forced`)
+    once every word was found, before the phone pass.
     """
     if not words:
         return _Forced([])
@@ -386,6 +390,8 @@ def _force_align(pcm: np.ndarray, words: Sequence[str]) -> Optional[_Forced]:
         return None  # the search ended without reaching the last word: no path
     # scored here, by the search, as the phone loop is (:func:`_acoustic_fit`)
     frames, in_words = _search_frame_scores(d, len(pcm) // _SAMPLES_PER_FRAME + 2)
+    if searched is not None:
+        searched(frames, in_words)
     try:
         d.set_alignment()  # second pass: phone and state boundaries within the words found
         _decode(d, pcm)
@@ -512,16 +518,57 @@ def _fitting_words(pcm: np.ndarray, words: Sequence[str], *, prefix: bool = Fals
     return kept
 
 
-def _align_words(pcm: np.ndarray, words: Sequence[str], loop, speech: Optional[np.ndarray] = None
+#: A transcript whose words score at least this much a frame in their own grammar search
+#: (pocketsphinx's log units; over the frames of the words and over the speech frames, the
+#: lower taken, as :func:`_acoustic_fit` takes them) fits without asking the free phone
+#: loop, whose search costs almost as much CPU as the alignment itself (issue 20). The
+#: search's scores are relative to the best of the senones it keeps active, silence and
+#: noise among them, so words forced onto other sounds score far lower. Measured on the
+#: cases of ``make bench``'s align-grid figure: the 40 GRID sentences' own transcripts
+#: -25.1 to -10.9 (34 of 40 at -20 or above), the MFA recording -13.4, the espeak samples
+#: -23.3 and -25.3 (so the loop judges them), another sentence's transcript at most -27.4
+#: (83 that aligned), and every transcript the loop finds not fitting (another sentence's,
+#: a letter left out, a word added) below -20: so the loop is asked only where it can
+#: change the answer.
+FIT_WITHOUT_LOOP = -20.0
+
+
+def _own_score(frames: Optional[np.ndarray], in_words: Optional[np.ndarray],
+               speech: Optional[np.ndarray]) -> Optional[float]:
+    """The grammar search's mean score a frame over the words' frames and over the speech
+    frames, the lower (None when there is none)."""
+    if frames is None or in_words is None:
+        return None
+    masks = [m for m in (in_words, speech) if m is not None]
+    n = min(len(frames), *(len(m) for m in masks))
+    means = [float(frames[:n][m[:n]].mean()) for m in masks if m[:n].any()]
+    return min(means) if means else None
+
+
+def _align_words(pcm: np.ndarray, words: Sequence[str], loop: "_PhoneLoop", speech: Optional[np.ndarray] = None
                  ) -> Tuple[Optional[List[_WordTiming]], List[str], Optional[float]]:
     """(timings, words left out, acoustic fit) of a transcript in one stretch of audio.
 
-    The strict alignment when it finds every word and fits at least at
-    :data:`NOT_FIT_CONFIDENCE`; else the words a tolerant search finds, aligned (timings
-    None when even those do not align). ``loop`` gives the phone loop's frame scores,
+    The strict alignment when it finds every word and either scores at least
+    :data:`FIT_WITHOUT_LOOP` in its own search (fit None: not asked) or fits at least at
+    :data:`NOT_FIT_CONFIDENCE` against the free phone loop; else the words a tolerant
+    search finds, aligned (timings None when even those do not align). ``loop`` gives the
+    phone loop's frame scores (started beside the phone pass when it will be asked),
     ``speech`` marks the frames that are speech.
     """
-    forced = _force_align(pcm, words)
+    clear = False
+
+    def searched(frames, in_words) -> None:
+        nonlocal clear
+        score = _own_score(frames, in_words, speech)
+        clear = score is not None and score >= FIT_WITHOUT_LOOP
+        if not clear:
+            loop.start()
+
+    forced = _force_align(pcm, words, searched=searched)
+    if forced is not None and clear:
+        return forced.timings, [], None
+    loop.start()
     fit = _acoustic_fit(loop(), forced, speech) if forced is not None else None
     if forced is not None and (fit is None or fit >= NOT_FIT_CONFIDENCE):
         return forced.timings, [], fit
@@ -668,27 +715,32 @@ def _loop_worker(conn, pcm: np.ndarray, parent: int) -> None:
 class _PhoneLoop:
     """The fit check's phone loop scores of ``pcm`` (:func:`_phone_loop_scores`), on call.
 
-    With ``workers`` of 2 or more and forking safe (:func:`_can_fork`), the loop is decoded in
-    a forked worker started here, beside the transcript's alignment in this process: the two
-    searches take about the same time (on the MFA recording 29 ms of CPU per second of audio
-    for the loop, 37 for the alignment), so on two cores the check adds almost nothing to
-    the wall-clock time. Otherwise, or if the worker fails, it is decoded here on the first
-    call. :meth:`close` ends a worker whose result was not wanted.
+    :meth:`start` decodes the loop in a forked worker, beside the transcript's alignment in
+    this process, when ``workers`` is 2 or more and forking is safe (:func:`_can_fork`):
+    the loop's search takes about as long as the phone pass it then runs beside (on the
+    MFA recording 29 ms of CPU per second of audio for the loop, 24 for the phone pass),
+    so on two cores the check adds little to the wall-clock time. Otherwise, or if the
+    worker fails, it is decoded here on the first call. :meth:`close` ends a worker whose
+    result was not wanted.
     """
 
     def __init__(self, pcm: np.ndarray, workers: int):
-        self._pcm, self._proc, self._conn, self._done = pcm, None, None, False
+        self._pcm, self._workers, self._proc, self._conn, self._done = pcm, workers, None, None, False
         self._scores: Optional[np.ndarray] = None
-        if workers >= 2 and _can_fork():
-            import multiprocessing
 
-            _aligner()  # loaded here once, so the worker starts with it in place
-            context = multiprocessing.get_context("fork")
-            self._conn, send = context.Pipe(duplex=False)
-            self._proc = context.Process(target=_loop_worker, args=(send, pcm, os.getpid()), daemon=True,
-                                         name="lipsync-phone-loop")
-            self._proc.start()
-            send.close()
+    def start(self) -> None:
+        """Begin decoding in a worker, if there may be one (else :meth:`__call__` decodes)."""
+        if self._proc is not None or self._done or self._workers < 2 or not _can_fork():
+            return
+        import multiprocessing
+
+        _aligner()  # loaded once, here, so the worker starts with it in place
+        context = multiprocessing.get_context("fork")
+        self._conn, send = context.Pipe(duplex=False)
+        self._proc = context.Process(target=_loop_worker, args=(send, self._pcm, os.getpid()), daemon=True,
+                                     name="lipsync-phone-loop")
+        self._proc.start()
+        send.close()
 
     def __call__(self) -> Optional[np.ndarray]:
         if not self._done:
