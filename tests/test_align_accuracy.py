@@ -368,3 +368,23 @@ def test_a_fit_check_worker_that_dies_is_replaced_by_decoding_here(monkeypatch):
     # the worker is forked, so it runs this module's (patched) function
     monkeypatch.setattr(A, "_loop_worker", lambda *args: _os._exit(3))
     _same_alignment(here, A.align_samples(pcm, text, jobs=2))
+
+
+def test_sound_onset_finds_where_a_band_starts():
+    # the bench's independent reference at pauses (sentence-initial "lay": voicing under
+    # 400 Hz; "set": frication at 4-8 kHz): a 200 Hz tone from 0.5 s, and 4-8 kHz noise
+    # from 0.7 s after a low hum that must not count
+    from lipsync.bench.align import sound_onset
+
+    sr, rng = 16000, np.random.default_rng(0)
+    t = np.arange(sr) / sr
+    tone = np.where(t >= 0.5, 8000 * np.sin(2 * np.pi * 200 * t), 0.0) + rng.normal(0, 3, sr)
+    assert abs(sound_onset(tone.astype(np.int16), 80, 400) - 0.5) <= 0.025
+    hiss = rng.normal(0, 3000, sr)
+    spectrum = np.fft.rfft(hiss)
+    spectrum[np.fft.rfftfreq(sr, 1 / sr) < 4000] = 0
+    hiss = np.fft.irfft(spectrum, sr) * (t >= 0.7)
+    hum = 3000 * np.sin(2 * np.pi * 150 * t) * (t >= 0.3)
+    x = (hiss + hum + rng.normal(0, 3, sr)).astype(np.int16)
+    assert abs(sound_onset(x, 4000, 8000) - 0.7) <= 0.025
+    assert sound_onset(np.zeros(sr, np.int16) + 1, 80, 400) is None

@@ -25,6 +25,9 @@ GRID's own word alignments; without it, the few copied into tests/data), rows of
    times) split by where the boundary is: between two words, or at a pause (a GRID
    ``sil``/``sp`` beside it: there the two aligners' silence models decide, with breaths,
    lip noise and the silent closure of a stop on either side; see :func:`grid_boundaries`);
+   and where the sentence starts with "lay" or "set" after a pause, both aligners' start
+   against the sound itself (:func:`sound_onset`: L's voicing, S's frication), signed
+   (negative: before the sound) and absolute;
 6. each sentence with other sentences' transcripts (the 7th, 13th and 20th next in name
    order: 3 each), with its letter left out, and with a word added: how many are reported
    (an AlignmentWarning), how many of those with a confidence below 0.5, and the
@@ -41,7 +44,7 @@ import statistics
 import time
 import warnings
 from pathlib import Path
-from typing import List
+from typing import List, Optional
 
 import numpy as np
 
@@ -302,6 +305,35 @@ def _grid_align(pcm, text):
     return al, [w for w in caught if issubclass(w.category, AlignmentWarning)]
 
 
+#: The band whose energy starts each sentence-initial GRID word that follows a pause and
+#: has no lip closure to time it by: "lay" begins voiced (its L: the voice's fundamental
+#: and L's low first formant, under 400 Hz), "set" with its S's frication (4-8 kHz).
+#: Breaths and lip noise before speech have little energy in either band.
+SOUND_ONSET_BANDS = {"lay": (80, 400), "set": (4000, 8000)}
+#: The onset is where the band rises this many dB above its level before speech (the 20th
+#: percentile of the first 0.3 s) and stays there for ONSET_FRAMES frames of 10 ms.
+ONSET_RISE_DB = 20.0
+ONSET_FRAMES = 3
+
+
+def sound_onset(pcm, lo: float, hi: float) -> Optional[float]:
+    """Seconds at which the energy between ``lo`` and ``hi`` Hz first rises for good
+    (:data:`ONSET_RISE_DB`, :data:`ONSET_FRAMES`) after the first 0.1 s, or None."""
+    x = np.asarray(pcm, dtype=np.float64) / 32768.0
+    n = (len(x) - 400) // 160 + 1
+    if n < 30:
+        return None
+    frames = np.lib.stride_tricks.sliding_window_view(x, 400)[::160][:n] * np.hanning(400)
+    spectrum = np.abs(np.fft.rfft(frames, axis=1)) ** 2
+    f = np.fft.rfftfreq(400, 1 / 16000)
+    db = 10 * np.log10(spectrum[:, (f >= lo) & (f < hi)].sum(axis=1) + 1e-12)
+    up = db > np.percentile(db[:30], 20) + ONSET_RISE_DB
+    for i in range(10, n - ONSET_FRAMES):
+        if up[i: i + ONSET_FRAMES].all():
+            return i * 0.01
+    return None
+
+
 @FIGURES.decorator("align-grid")
 def _align_grid(ctx: Context, rows: List[dict]) -> None:
     from ..speech.audio import load_audio
@@ -343,6 +375,23 @@ def _align_grid(ctx: Context, rows: List[dict]) -> None:
             row[f"{key}_mean_ms"] = round(1000 * float(e.mean()), 1)
             row[f"{key}_p90_ms"] = round(1000 * float(np.percentile(e, 90)), 1)
     rows.append(row)
+    # 5b. who is right at a pause: sentence-initial "lay" and "set" against the sound itself
+    onsets = {}
+    for (name, pcm, ref, words), (al, warned) in zip(sentences, results):
+        if words and words[0] in SOUND_ONSET_BANDS and al.words.labels() == words:
+            onset = sound_onset(pcm, *SOUND_ONSET_BANDS[words[0]])
+            first = next(r for r in ref if r[2] not in _GRID_SILENCE)
+            if onset is not None:
+                onsets.setdefault(words[0], []).append((al.words[0].start - onset, first[0] - onset))
+    for word, pairs in sorted(onsets.items()):
+        ours, theirs = (np.array(x) for x in zip(*pairs))
+        lo, hi = SOUND_ONSET_BANDS[word]
+        rows.append({"figure": "align-grid",
+                     "case": f'GRID s1, start of a first "{word}" against its sound ({lo}-{hi} Hz onset)',
+                     "n": len(pairs), "ours_median_ms": round(1000 * float(np.median(ours))),
+                     "ours_mean_abs_ms": round(1000 * float(np.abs(ours).mean())),
+                     "grid_median_ms": round(1000 * float(np.median(theirs))),
+                     "grid_mean_abs_ms": round(1000 * float(np.abs(theirs).mean()))})
     # 6. transcripts that do not fit: another sentence's, the letter left out, a word added
     cases = {"another sentence's transcript (3 each)": [], "its letter left out": [], "a word added": []}
     for i, (name, pcm, ref, words) in enumerate(sentences):
