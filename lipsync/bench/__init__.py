@@ -31,7 +31,7 @@ from ..registry import Registry
 FIGURES: "Registry[Callable[[Context, List[dict]], None]]" = Registry("benchmark figure")
 
 # Figure modules, run in this order; a module not written yet is skipped.
-_FIGURE_MODULES = ["render", "align", "live", "batch", "editor", "face", "videobank", "alpha", "coarticulation",
+_FIGURE_MODULES = ["render", "align", "live", "batch", "editor", "face", "videobank", "alpha", "coarticulation", "ceiling",
                    "atlas", "inbetween"]
 
 
