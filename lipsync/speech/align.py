@@ -17,11 +17,12 @@ The stages, each a function over plain values::
   acoustic score of the aligned words per frame against a free phone loop's over the same
   frames (:func:`_acoustic_fit`). A transcript that aligns keeps its alignment, and the
   confidence figure says how well it fits; only one that really does not fit (no path, or
-  a fit below :data:`NOT_FIT_CONFIDENCE`) goes the relaxed way below. The phone loop is
-  decoded in a forked worker beside the alignment when there are two or more jobs
-  (:class:`_PhoneLoop`). (Recordings longer than :data:`MAX_CHUNK_S` are judged by the
-  share of their words found instead: the phone loop would add half again to their CPU
-  time.)
+  a fit below :data:`NOT_FIT_CONFIDENCE`) goes the relaxed way below. The phone loop costs
+  nearly as much CPU as the alignment, so it is decoded only when the words' scores in
+  their own search leave doubt (:data:`FIT_WITHOUT_LOOP`), and then in a forked worker
+  beside the phone pass when there are two or more jobs (:class:`_PhoneLoop`).
+  (Recordings longer than :data:`MAX_CHUNK_S` are judged by the share of their words found
+  instead.)
 * Without one, the words are recognised first with pocketsphinx's US-English language
   model (in chunks of :data:`RECOGNITION_CHUNK_S`, in worker processes when there are
   several), then their phones are aligned inside the recognised word boundaries.
