@@ -118,14 +118,13 @@ def _by_phone(clip: _Clip, phone_median: Dict[str, float], medians: Dict[str, fl
     return out
 
 
-def _loudness(clip: _Clip) -> np.ndarray:
+def _loudness(clip: _Clip, rest: str) -> np.ndarray:
     """Each sound's level in tens of dB against the sentence's median speech sound (0 for
     rest and the breath)."""
     from ..speech.audio import load_audio
 
     pcm = load_audio(G.video(clip.name)).astype(np.float64) / 32768.0
     level = np.zeros(len(clip.segments))
-    rest = _pmap().silence
     for k, (s, e, v) in enumerate(clip.segments[: clip.n_sounds]):
         x = pcm[int(s * 16000): int(e * 16000)]
         level[k] = 10 * np.log10(np.mean(x * x) + 1e-10) if len(x) and v != rest else np.nan
@@ -166,7 +165,7 @@ def figure(ctx: Context, rows: List[dict]) -> None:
     phone_median = _phone_medians(pmap)
     row("phone medians", _mean_r(held, lambda c: _by_phone(c, phone_median, medians)))
     rest = medians[pmap.silence]
-    levels = {c.name: _loudness(c) for c in bank + held}
+    levels = {c.name: _loudness(c, pmap.silence) for c in bank + held}
 
     def loud(scale):
         lo, hi = LOUDNESS_RANGE

@@ -463,13 +463,22 @@ def _acoustic_fit(loop: Optional[np.ndarray], forced: Optional[_Forced],
     """
     if loop is None or forced is None or forced.frames is None or not forced.timings:
         return None
-    masks = [m for m in (forced.words, speech) if m is not None]
-    n = min(len(loop), len(forced.frames), *(len(m) for m in masks))
-    diff = forced.frames[:n] - loop[:n]
-    ratios = [float(diff[m[:n]].mean()) for m in masks if m[:n].any()]
-    if not ratios:
+    n = min(len(loop), len(forced.frames))
+    ratio = _lower_mean(forced.frames[:n] - loop[:n], (forced.words, speech))
+    if ratio is None:
         return None
-    return float(np.clip(0.5 + (min(ratios) - FIT_LLR_CENTRE) / (2 * FIT_LLR_SPAN), 0.0, 1.0))
+    return float(np.clip(0.5 + (ratio - FIT_LLR_CENTRE) / (2 * FIT_LLR_SPAN), 0.0, 1.0))
+
+
+def _lower_mean(values: np.ndarray, masks) -> Optional[float]:
+    """The lower of the means of ``values`` over each mask's frames (masks that are None or
+    mark no frame are left out; None when none is left)."""
+    masks = [m for m in masks if m is not None]
+    if not masks:
+        return None
+    n = min(len(values), *(len(m) for m in masks))
+    means = [float(values[:n][m[:n]].mean()) for m in masks if m[:n].any()]
+    return min(means) if means else None
 
 
 #: Probability of skipping a transcript word in the tolerant pass (:func:`_fitting_words`).
@@ -540,10 +549,7 @@ def _own_score(frames: Optional[np.ndarray], in_words: Optional[np.ndarray],
     frames, the lower (None when there is none)."""
     if frames is None or in_words is None:
         return None
-    masks = [m for m in (in_words, speech) if m is not None]
-    n = min(len(frames), *(len(m) for m in masks))
-    means = [float(frames[:n][m[:n]].mean()) for m in masks if m[:n].any()]
-    return min(means) if means else None
+    return _lower_mean(frames, (in_words, speech))
 
 
 def _align_words(pcm: np.ndarray, words: Sequence[str], loop: "_PhoneLoop", speech: Optional[np.ndarray] = None
