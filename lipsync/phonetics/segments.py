@@ -10,7 +10,8 @@ kept apart because they do not shape the mouth. :func:`split` cuts a whole trans
 What counts as one phone: one base letter; two or three vowels (a diphthong or
 triphthong, ``aɪ``, ``aɪə``); a vowel and a glide (MFA's ``aj``, ``ow``); a stop or nasal
 followed by a fricative, trill or approximant of another letter (affricates and prenasalised
-stops: ``ts``, ``pf``, ``tʃ``, ``mb``), two different stops (``kp``, labial-velar); or any
+stops: ``ts``, ``pf``, ``tʃ``, ``mb``), two different stops or nasals (``kp``, ``ŋm``:
+labial-velar); or any
 two letters joined by a tie (``t͡s``, ``k͡p``). Anything else (``zz``, ``qq``, ``xyz``) is not
 a phone, so a label such as ``"zz"`` still warns as unknown rather than passing for IPA.
 
@@ -232,8 +233,8 @@ def _one_phone(parts: List[Tuple[str, set, bool]]) -> bool:
             return True  # affricate or prenasalised stop: ts pf tʃ tɕ ʈʂ kx mb nd
         if first.manner == "stop" and second.manner == "stop":
             return True  # doubly articulated stop: kp ɡb
-        if first.manner == "nasal" and second.manner == "stop":
-            return True  # prenasalised stop: mb nd ŋɡ
+        if first.manner == "nasal" and second.manner in ("stop", "nasal"):
+            return True  # prenasalised stop (mb nd ŋɡ), doubly articulated nasal (Vietnamese ŋm)
     if len(parts) == 2 and feats[0].kind == CONSONANT and bases[1] in _GLIDES:
         return False
     return False
