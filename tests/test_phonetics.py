@@ -331,3 +331,17 @@ def test_rules_follow_a_bank_with_preston_blair_names():
     vt, pmap = bank_viseme_timeline(tl(["b", "y", "ʁ", "a", "ɥ", "f"]), load_map("rhubarb"), pb)
     assert vt.labels() == ["MBP", "U", "etc", "AI", "U", "FV"]
     assert set(pmap.visemes()) <= set(pb)
+
+
+def test_feature_rules_agree_with_the_english_maps_on_every_english_phone():
+    """The rule sets reproduce english-to-rhubarb and english-to-oculus on the IPA of every
+    ARPAbet phone, so English in IPA and English in ARPAbet show the same mouth. The one
+    difference is Oculus's affricates: the rules split them in time (t: DD, ʃ: CH) while the
+    English map shows CH for all of CH and JH (and keeps doing so: tʃ and dʒ are in its phone set)."""
+    from lipsync.phonetics.notations import ARPABET
+
+    for name, rules in (("english-to-rhubarb", "rhubarb"), ("english-to-oculus", "oculus")):
+        pmap = load_map(name)
+        differ = {a for a, ipa in ARPABET.items() if pmap.targets(a) != phonetics.label_visemes(ipa, rules)}
+        assert differ == (set() if rules == "rhubarb" else {"CH", "JH"}), (name, differ)
+        assert pmap.targets("tʃ", notation="ipa") == pmap.targets("CH")
