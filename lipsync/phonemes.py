@@ -160,7 +160,8 @@ class PhonemeMap(BaseModel):
     def _rules_valid(cls, v):
         if isinstance(v, str):
             if v != "none" and v not in _rules.RULESETS:
-                raise ValueError(f"unknown rule set {v!r}; one of {', '.join(_rules.RULESETS)}, none, or a list of rows")
+                raise ValueError(f"unknown rule set {v!r}; one of {', '.join(_rules.RULESETS)}, none, "
+                                 f"or a list of rows")
         elif v is not None:
             _rules.compile_rules(v)
         return v

@@ -16,7 +16,7 @@ Examples
 from __future__ import annotations
 
 import functools
-from typing import Dict, Optional, Tuple
+from typing import Dict, Tuple
 
 from .features import BACKNESS, HEIGHTS, Features
 from .notations import ARPABET
@@ -149,11 +149,3 @@ def closest_english(segment: str) -> str:
     if len(phones) != 1:
         raise ValueError(f"{segment!r} is two en-us phones {phones!r}; use english_phones()")
     return phones[0]
-
-
-def closest_english_or_none(segment: str) -> Optional[str]:
-    """:func:`closest_english`, or None where it would raise."""
-    try:
-        return closest_english(segment)
-    except ValueError:
-        return None

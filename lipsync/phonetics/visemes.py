@@ -27,7 +27,6 @@ True
 from __future__ import annotations
 
 import functools
-from dataclasses import dataclass
 from typing import Any, Dict, Iterable, List, Mapping, Optional, Sequence, Tuple, Union
 
 from .features import BACKNESS, HEIGHTS, MANNERS, PLACES, Features
