@@ -265,7 +265,8 @@ def test_diphthongs_and_affricates_split_long_vowels_do_not():
 def test_closest_english_spot_checks():
     cases = {"ʁ": "R", "y": "UW", "ɲ": "N", "β": "B", "ʃ": "SH", "ɕ": "SH", "x": "HH", "ɾ": "D", "ʎ": "L",
              "œ̃": "AO", "ɯ": "UW", "e": "EY", "o": "OW", "ɑ̃ː": "AA", "tʃ": "CH", "t͡ɕʰ": "CH", "ɫ": "L",
-             "ɛ": "EH", "ɪ": "IH", "kʷ": "K", "ɡʲ": "G", "ʂ": "SH", "ʐ": "ZH", "v": "V", "ð": "DH"}
+             "ɛ": "EH", "ɪ": "IH", "kʷ": "K", "ɡʲ": "G", "ʂ": "SH", "ʐ": "ZH", "v": "V", "ð": "DH",
+             "a": "AA", "ä": "AA", "ɐ": "AA", "æ": "AE", "ʌ": "AH", "ə": "AH"}
     assert {k: phonetics.closest_english(k) for k in cases} == cases
     assert phonetics.english_phones("pf") == ("P", "F") and phonetics.english_phones("aɪ") == ("AY",)
     with pytest.raises(ValueError, match="english_phones"):
