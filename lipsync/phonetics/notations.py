@@ -345,7 +345,7 @@ def detect(labels: Iterable[str]) -> str:
     tone_finals = set()
     ipa = False
     upper_arpabet = False
-    for label in labels:
+    for label in set(labels):  # a timeline repeats a few dozen labels thousands of times
         text = label.strip()
         low = text.lower()
         if low in SILENCE:
