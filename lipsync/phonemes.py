@@ -51,6 +51,7 @@ from . import phonetics
 from ._data import data_dir
 from .errors import MapError, TimelineError, UnknownNameError
 from .phonetics import visemes as _rules
+from .phonetics.segments import parse_sequence as _parse_sequence
 from .registry import Registry
 from .timeline import VISEME, Segment, Timeline
 
@@ -246,7 +247,7 @@ class PhonemeMap(BaseModel):
         """
         if notation in _CONVERTED and not self.is_silence(label):
             ipa = phonetics.to_ipa(label, notation)
-            parts = phonetics.segments.parse_sequence(ipa) if ipa else None
+            parts = _parse_sequence(ipa) if ipa else None
             if parts and self._compiled_rules:  # X-SAMPA's R is ʁ even where the map has ARPAbet's R
                 return _rules.parts_visemes(parts, self._compiled_rules)
             notation = None  # not of that notation, or no rules to read it by: the label alone

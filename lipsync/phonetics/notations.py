@@ -35,7 +35,8 @@ ARPABET: Dict[str, str] = {
     "M": "m", "N": "n", "NG": "ŋ", "P": "p", "R": "ɹ", "S": "s", "SH": "ʃ", "T": "t", "TH": "θ", "V": "v",
     "W": "w", "Y": "j", "Z": "z", "ZH": "ʒ",
 }
-ARPABET_VOWELS = frozenset(k for k, v in ARPABET.items() if parse(v) and parse(v).parts[0].is_vowel)
+# The phones that carry CMUdict's stress digits (AH0, OW1).
+ARPABET_VOWELS = frozenset({"AA", "AE", "AH", "AO", "AW", "AY", "EH", "ER", "EY", "IH", "IY", "OW", "OY", "UH", "UW"})
 
 # TIMIT's labels beyond ARPAbet's (TIMIT phonetic transcription conventions, phoncode.doc).
 # Closures are the stop's own articulation held (bcl: the lips already closed for b).
