@@ -134,7 +134,8 @@ class Phone:
     @property
     def kind(self) -> str:
         """``vowel``, ``consonant``, ``diphthong`` (vowel + vowel or glide),
-        ``affricate`` (two consonants) or ``sequence``."""
+        ``affricate`` (two consonants: also prenasalised and doubly articulated stops) or
+        ``sequence``."""
         if len(self.parts) == 1:
             return self.parts[0].features.kind
         vowels = [p.is_vowel for p in self.parts]
@@ -145,7 +146,13 @@ class Phone:
         return "sequence"
 
     def ipa(self) -> str:
-        """The segments without tone and stress, in IPA (``"ˈa˥ː"`` -> ``"aː"``)."""
+        """The segments without tone and stress, in IPA.
+
+        Examples
+        --------
+        >>> parse("ˈa˥ː").ipa(), parse("t͡sʰ").ipa()
+        ('aː', 'tsʰ')
+        """
         return "".join(p.ipa() for p in self.parts)
 
 
@@ -235,8 +242,6 @@ def _one_phone(parts: List[Tuple[str, set, bool]]) -> bool:
             return True  # doubly articulated stop: kp ɡb
         if first.manner == "nasal" and second.manner in ("stop", "nasal"):
             return True  # prenasalised stop (mb nd ŋɡ), doubly articulated nasal (Vietnamese ŋm)
-    if len(parts) == 2 and feats[0].kind == CONSONANT and bases[1] in _GLIDES:
-        return False
     return False
 
 
