@@ -23,6 +23,9 @@ bpy.ops.preferences.addon_enable(module="lipsync_blender")
 import lipsync_blender  # noqa: E402  (installed just now)
 
 results["module_file"] = lipsync_blender.__file__
+import importlib.util  # noqa: E402
+
+results["lipsync_importable"] = importlib.util.find_spec("lipsync") is not None  # the add-on must not need it
 scene = bpy.context.scene
 for obj in list(scene.objects):  # the factory cube, light and camera
     bpy.data.objects.remove(obj)
@@ -76,13 +79,38 @@ def render(name, frame, size):
 
 
 for case in cfg["cases"]:
-    scene.render.fps, scene.render.fps_base = case["scene_fps"], 1.0
+    scene.render.fps, scene.render.fps_base = case.get("scene_fps", 24), 1.0
     for obj in scene.objects:
         if obj.type == "MESH":
             obj.hide_render = True  # earlier cases' planes
     kind = case["kind"]
+    if kind == "bad":  # an operator given a bad file: it must refuse with a message, change nothing
+        before = len(bpy.data.objects), len(bpy.data.images)
+        op = getattr(bpy.ops.lipsync, case["operator"])
+        try:
+            r, message = op(filepath=case["path"]), None
+        except RuntimeError as exc:  # background mode raises an operator's ERROR report
+            r, message = {"CANCELLED"}, str(exc)
+        results["values"][case["name"]] = {"result": sorted(r), "message": message,
+                                           "unchanged": before == (len(bpy.data.objects), len(bpy.data.images))}
+        continue
     if kind == "import":
-        r = bpy.ops.lipsync.import_render(filepath=case["path"], fps=case.get("fps", 25.0), sound=case.get("sound", ""))
+        target = case.get("target", "PLANE")
+        if target == "MATERIAL":  # the user's own object, material and image node
+            mesh = bpy.data.meshes.new("face")
+            mesh.from_pydata([(-0.6, 0, -0.5), (0.6, 0, -0.5), (0.6, 0, 0.5), (-0.6, 0, 0.5)], [], [(0, 1, 2, 3)])
+            uv = mesh.uv_layers.new(name="UVMap")
+            for loop, co in zip(uv.data, ((0, 0), (1, 0), (1, 1), (0, 1))):
+                loop.uv = co
+            face = bpy.data.objects.new("face", mesh)
+            scene.collection.objects.link(face)
+            mat = bpy.data.materials.new("skin")
+            mat.use_nodes = True
+            mat.node_tree.nodes.new("ShaderNodeTexImage")
+            face.data.materials.append(mat)
+            bpy.context.view_layer.objects.active = face
+        r = bpy.ops.lipsync.import_render(filepath=case["path"], fps=case.get("fps", 25.0), sound=case.get("sound", ""),
+                                          target=target)
         assert r == {"FINISHED"}, r
         plane = bpy.context.active_object
         scene.render.engine = case.get("engine", "BLENDER_WORKBENCH")

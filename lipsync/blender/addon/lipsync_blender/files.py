@@ -291,21 +291,12 @@ def read_cues(path: str, *, moho_fps: float = 24.0) -> Cues:
     (``.dat``, frames at ``moho_fps``), chosen by the extension.
     """
     ext = os.path.splitext(path)[1].lower()
-    text = _read_text(path)
-    if ext == ".tsv":
-        return _tsv(path, text)
-    if ext == ".json":
-        return _rhubarb_json(path, text)
-    if ext == ".xml":
-        return _rhubarb_xml(path, text)
-    if ext == ".textgrid":
-        return _textgrid(path, text)
-    if ext == ".txt":
-        return _audacity(path, text)
-    if ext == ".dat":
-        return _moho(path, text, moho_fps)
-    raise LipsyncFileError(f"{path}: unknown cue file type {ext or '(no extension)'} (.tsv, .json, .xml, "
-                           ".TextGrid, .txt, .dat: the files `lipsync cues` writes)")
+    readers = {".tsv": _tsv, ".json": _rhubarb_json, ".xml": _rhubarb_xml, ".textgrid": _textgrid,
+               ".txt": _audacity, ".dat": lambda p, text: _moho(p, text, moho_fps)}
+    if ext not in readers:
+        raise LipsyncFileError(f"{path}: unknown cue file type {ext or '(no extension)'} (.tsv, .json, .xml, "
+                               ".TextGrid, .txt, .dat: the files `lipsync cues` writes)")
+    return readers[ext](path, _read_text(path))
 
 
 def cue_at(cues: Cues, seconds: float) -> str:
