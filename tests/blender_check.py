@@ -88,7 +88,7 @@ for case in cfg["cases"]:
         before = len(bpy.data.objects), len(bpy.data.images)
         op = getattr(bpy.ops.lipsync, case["operator"])
         try:
-            r, message = op(filepath=case["path"]), None
+            r, message = op(filepath=case["path"], **case.get("options", {})), None
         except RuntimeError as exc:  # background mode raises an operator's ERROR report
             r, message = {"CANCELLED"}, str(exc)
         results["values"][case["name"]] = {"result": sorted(r), "message": message,

@@ -99,6 +99,8 @@ def run(tmp_path_factory):
         {"kind": "import", "name": "mat24", "scene_fps": 24, "path": str(tmp / "frames"), "fps": 25,
          "target": "MATERIAL", "frames": [START + 29], "size": SIZE},
         {"kind": "bad", "name": "gap", "operator": "import_render", "path": str(tmp / "gap" / "frame_000000.png")},
+        {"kind": "bad", "name": "nosound", "operator": "import_render", "path": str(tmp / "frames"),
+         "options": {"sound": str(tmp / "missing.wav")}},
         {"kind": "bad", "name": "notcues", "operator": "key_cues", "path": str(tmp / "frames" / "frame_000000.png")},
         {"kind": "cues", "name": "prop", "scene_fps": 24, "target": "PROPERTY", "path": str(tmp / "cues.tsv"),
          "frames": cues_frames},
@@ -227,6 +229,8 @@ def test_bad_files_are_refused_with_a_message_naming_them_and_nothing_is_made(ru
     gap = results["values"]["gap"]
     assert gap["result"] == ["CANCELLED"] and gap["unchanged"]
     assert str(tmp / "gap") in gap["message"] and "frame 2 is missing" in gap["message"]
+    nosound = results["values"]["nosound"]  # checked before the plane is made
+    assert nosound["result"] == ["CANCELLED"] and nosound["unchanged"] and "missing.wav: no such sound" in nosound["message"]
     bad = results["values"]["notcues"]
     assert bad["result"] == ["CANCELLED"] and bad["unchanged"]
     assert "frame_000000.png" in bad["message"] and "unknown cue file type .png" in bad["message"]

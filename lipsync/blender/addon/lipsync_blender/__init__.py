@@ -68,6 +68,8 @@ class LIPSYNC_OT_import_render(bpy.types.Operator, ImportHelper):
         scene = context.scene
         start = _start(scene, self.use_scene_start, self.frame_start)
         try:
+            if self.sound:  # checked first: a refusal leaves nothing half-made
+                build.check_sound(bpy.path.abspath(self.sound))
             if self.filepath.lower().endswith(".json"):
                 clip = files.atlas_clip(self.filepath)
                 made = build.import_atlas(context, clip, start=start, target=self.target, height=self.height)

@@ -107,6 +107,13 @@ def import_sequence(context, seq, *, start, fps, target, height):
     """A PNG sequence on a plane or the active material's image node; returns the object."""
     scene = context.scene
     first = os.path.join(seq.folder, seq.files[0])
+    if target != "PLANE":  # the user's node first: a refusal must leave nothing behind
+        obj, mat = _active_material(context)
+        nodes = mat.node_tree.nodes
+        tex = nodes.active if nodes.active is not None and nodes.active.type == "TEX_IMAGE" else \
+            next((n for n in nodes if n.type == "TEX_IMAGE"), None)
+        if tex is None:
+            raise TargetError(f"material {mat.name} has no Image Texture node to show the frames")
     img = _load_image(first, sequence=True)
     w, h = img.size
     if target == "PLANE":
@@ -117,13 +124,6 @@ def import_sequence(context, seq, *, start, fps, target, height):
         bsdf = _bsdf(mat)
         mat.node_tree.links.new(tex.outputs["Color"], bsdf.inputs["Base Color"])
         mat.node_tree.links.new(tex.outputs["Alpha"], bsdf.inputs["Alpha"])
-    else:
-        obj, mat = _active_material(context)
-        nodes = mat.node_tree.nodes
-        tex = nodes.active if nodes.active is not None and nodes.active.type == "TEX_IMAGE" else \
-            next((n for n in nodes if n.type == "TEX_IMAGE"), None)
-        if tex is None:
-            raise TargetError(f"material {mat.name} has no Image Texture node to show the frames")
     tex.image = img
     mat.node_tree.nodes.active = tex  # what Workbench's Texture colour and the viewport show
     user = tex.image_user
@@ -188,6 +188,7 @@ def import_atlas(context, clip, *, start, target, height):
         mat = _new_material(obj, "lipsync atlas")
     else:
         obj, mat = _active_material(context)
+    _bsdf(mat)  # refuse a material without one before adding anything
     nt = mat.node_tree
     uv = _node(nt, "ShaderNodeTexCoord", (-1400, 300)).outputs["UV"]
     # texture UV = corner(cell) + frame UV * (frame size * scale / texture size); v grows up
@@ -245,10 +246,14 @@ def import_atlas(context, clip, *, start, target, height):
     return obj
 
 
-def add_sound(scene, path, *, start):
-    """The speech as a sound strip starting at Blender frame ``start`` (the first free channel)."""
+def check_sound(path):
     if not os.path.isfile(path):
         raise files.LipsyncFileError(f"{path}: no such sound file")
+
+
+def add_sound(scene, path, *, start):
+    """The speech as a sound strip starting at Blender frame ``start`` (the first free channel)."""
+    check_sound(path)
     editor = scene.sequence_editor or scene.sequence_editor_create()
     channel = 1 + max((s.channel for s in editor.sequences_all), default=0)
     return editor.sequences.new_sound(os.path.basename(path), path, channel, start)
@@ -335,8 +340,8 @@ def key_poses(scene, obj, cues, *, start, prefix):
         for fc in act.fcurves:
             channels.setdefault((fc.data_path, fc.array_index), {})[s] = fc.evaluate(at)
     points = _cue_points(scene, cues, start)
-    target = _action(obj, f"{obj.name} lipsync")
-    if any(a is target for a in poses.values()):
+    current = obj.animation_data.action if obj.animation_data else None
+    if current is not None and any(a is current for a in poses.values()):
         raise TargetError(f"{obj.name}'s current action is one of the poses; give the armature another action")
     for (path, index), values in sorted(channels.items()):
         constant_keys(obj, path, index, [(f, values.get(s, _rest_value(path, index))) for f, s in points],
