@@ -95,6 +95,9 @@ def run(tmp_path_factory):
         # the atlas at 30 fps in a 24 fps scene
         {"kind": "import", "name": "atlas24", "scene_fps": 24, "path": str(tmp / "atlas" / "hello.frames.json"),
          "engine": "BLENDER_EEVEE", "frames": [START + 9, START + 29], "size": SIZE},
+        # frames given as 12 fps with their 25 fps speech: imported, with a warning
+        {"kind": "import", "name": "wrongfps", "scene_fps": 24, "path": str(tmp / "frames"), "fps": 12,
+         "sound": str(SPEECH), "frames": [], "size": SIZE},
         # the user's own object: its material's Image Texture node gets the frames
         {"kind": "import", "name": "mat24", "scene_fps": 24, "path": str(tmp / "frames"), "fps": 25,
          "target": "MATERIAL", "frames": [START + 29], "size": SIZE},
@@ -117,6 +120,7 @@ def run(tmp_path_factory):
                           capture_output=True, text=True, env=env, timeout=300)
     assert proc.returncode == 0, (proc.stdout + proc.stderr)[-3000:]
     results = json.loads((tmp / "out" / "results.json").read_text())
+    results["stdout"] = proc.stdout
     return tmp, cfg, results
 
 
@@ -199,6 +203,12 @@ def test_sound_strip_starts_with_the_frames_and_lasts_the_speech(run):
         assert strip["filepath"] == str(SPEECH)
         assert strip["frame_final_start"] == START
         assert abs(strip["frame_final_duration"] - seconds * fps) < 1.0, (strip, seconds * fps)
+
+
+def test_frames_at_another_rate_than_their_speech_are_warned_about(run):
+    _, _, results = run
+    warnings = [line for line in results["stdout"].splitlines() if "is Render fps the --fps" in line]
+    assert len(warnings) == 1 and "75 frames at 12 fps last 6.25 s but the speech lasts 2.96 s" in warnings[0]
 
 
 def test_cues_keyed_on_a_property_shape_keys_and_poses(run):

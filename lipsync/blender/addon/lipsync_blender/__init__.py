@@ -79,11 +79,17 @@ class LIPSYNC_OT_import_render(bpy.types.Operator, ImportHelper):
                 made = build.import_sequence(context, seq, start=start, fps=self.fps, target=self.target,
                                              height=self.height)
                 count, fps = len(seq.numbers), self.fps
-            if self.sound:
-                build.add_sound(scene, bpy.path.abspath(self.sound), start=start)
+            strip = build.add_sound(scene, bpy.path.abspath(self.sound), start=start) if self.sound else None
         except (files.LipsyncFileError, build.TargetError) as exc:
             self.report({"ERROR"}, str(exc))
             return {"CANCELLED"}
+        if strip is not None:
+            # lipsync renders ceil(duration * fps) frames: a clip much longer or shorter than its
+            # speech was rendered at another rate than the one given
+            speech = strip.frame_final_duration / build.scene_fps(scene)
+            if abs(count / fps - speech) > 1.5 / fps + 1.0 / build.scene_fps(scene):  # + the strip's rounding
+                self.report({"WARNING"}, f"lipsync: {count} frames at {fps:g} fps last {count / fps:.2f} s but the "
+                                         f"speech lasts {speech:.2f} s: is Render fps the --fps they were rendered at?")
         last = start + (count / fps) * build.scene_fps(scene)
         self.report({"INFO"}, f"lipsync: {count} frames at {fps:g} fps on {made.name}, Blender frames "
                               f"{start} to {last:.1f}")

@@ -255,8 +255,11 @@ def add_sound(scene, path, *, start):
     """The speech as a sound strip starting at Blender frame ``start`` (the first free channel)."""
     check_sound(path)
     editor = scene.sequence_editor or scene.sequence_editor_create()
-    channel = 1 + max((s.channel for s in editor.sequences_all), default=0)
-    return editor.sequences.new_sound(os.path.basename(path), path, channel, start)
+    # Blender 4.4 renamed the sequencer's `sequences` to `strips`
+    every = getattr(editor, "strips_all", None) or editor.sequences_all
+    channel = 1 + max((s.channel for s in every), default=0)
+    strips = getattr(editor, "strips", None) or editor.sequences
+    return strips.new_sound(os.path.basename(path), path, channel, start)
 
 
 # ---- cues -------------------------------------------------------------------------------------
