@@ -75,8 +75,12 @@ def run(tmp_path_factory):
     assert main(["render", str(HELLO), "--bank", str(bank), "-o", str(tmp / "frames") + "/", "--fps", "25", "-q",
                  *store]) == 0
     assert main(["atlas", str(bank), "-o", str(tmp / "atlas" / "mouth.png"), str(HELLO), "-q", *store]) == 0
-    assert main(["cues", str(HELLO), "--format", "atlas", "--atlas", str(tmp / "atlas" / "mouth.json"),
-                 "--fps", "30", "--bank", str(bank), "-o", str(tmp / "atlas" / "hello.frames.json")]) == 0
+    # and one at half scale (cells and base half size, drawn back at frame size)
+    assert main(["atlas", str(bank), "-o", str(tmp / "half" / "mouth.png"), str(HELLO), "-q", "--scale", "0.5",
+                 *store]) == 0
+    for folder in ("atlas", "half"):
+        assert main(["cues", str(HELLO), "--format", "atlas", "--atlas", str(tmp / folder / "mouth.json"),
+                     "--fps", "30", "--bank", str(bank), "-o", str(tmp / folder / "hello.frames.json")]) == 0
     for ext in ("tsv", "json", "xml"):
         assert main(["cues", str(HELLO), "-o", str(tmp / f"cues.{ext}")]) == 0
     (tmp / "gap").mkdir()  # frames 0, 1, 3: frame 2 missing
@@ -105,6 +109,8 @@ def run(tmp_path_factory):
         {"kind": "bad", "name": "nosound", "operator": "import_render", "path": str(tmp / "frames"),
          "options": {"sound": str(tmp / "missing.wav")}},
         {"kind": "bad", "name": "notcues", "operator": "key_cues", "path": str(tmp / "frames" / "frame_000000.png")},
+        {"kind": "import", "name": "half24", "scene_fps": 24, "path": str(tmp / "half" / "hello.frames.json"),
+         "engine": "BLENDER_EEVEE", "frames": [START + 29], "size": SIZE},
         {"kind": "cues", "name": "prop", "scene_fps": 24, "target": "PROPERTY", "path": str(tmp / "cues.tsv"),
          "frames": cues_frames},
         {"kind": "cues", "name": "keys", "scene_fps": 30, "target": "SHAPE_KEYS", "path": str(tmp / "cues.json"),
@@ -160,25 +166,34 @@ def test_png_sequence_shows_lipsyncs_frame_for_each_frames_time(run, name):
             assert np.abs(shown[OPAQUE:, :, :3] - frames[k][1 + OPAQUE:-1, 1:-1, :3]).max() <= 2
 
 
-def test_atlas_shows_the_cell_frames_json_names_at_each_frames_time(run):
+@pytest.mark.parametrize("name", ["atlas24", "half24"])
+def test_atlas_shows_the_cell_frames_json_names_at_each_frames_time(run, name):
     tmp, cfg, results = run
-    case = _case(cfg, "atlas24")
-    atlas = json.loads((tmp / "atlas" / "mouth.json").read_text())
-    doc = json.loads((tmp / "atlas" / "hello.frames.json").read_text())
-    texture, base = _read(tmp / "atlas" / "mouth.png"), _read(tmp / "atlas" / "mouth.base.png")
+    case = _case(cfg, name)
+    folder = tmp / {"atlas24": "atlas", "half24": "half"}[name]
+    atlas = json.loads((folder / "mouth.json").read_text())
+    doc = json.loads((folder / "hello.frames.json").read_text())
+    texture, base = _read(folder / "mouth.png"), _read(folder / "mouth.base.png")
     rx, ry, rw, rh = atlas["region"]
+    scale = atlas["scale"]
+    assert scale == {"atlas24": 1.0, "half24": 0.5}[name]
+    # the schema's drawing rule at frame size: base, then the cell's rect into the region, each
+    # texel drawn 1 / scale frame pixels wide (a frame pixel's centre picks its texel)
+    ys, xs = np.mgrid[0:SIZE[1], 0:SIZE[0]]
+    base_px = base[((ys + 0.5) * scale).astype(int), ((xs + 0.5) * scale).astype(int)]
+    inside = (xs >= rx) & (xs < rx + rw) & (ys >= ry) & (ys < ry + rh)
 
-    def frame_of(cell):  # the schema's drawing rule: base, then the cell's rect into the region
-        img = base.copy()
-        x, y, w, h = atlas["cells"][cell]["rect"]
-        img[ry:ry + rh, rx:rx + rw] = texture[y:y + h, x:x + w]
-        return img[1:-1, 1:-1]
+    def frame_of(cell):
+        x, y = atlas["cells"][cell]["rect"][:2]
+        cy = np.clip(y + ((ys - ry + 0.5) * scale).astype(int), 0, texture.shape[0] - 1)
+        cx = np.clip(x + ((xs - rx + 0.5) * scale).astype(int), 0, texture.shape[1] - 1)
+        return np.where(inside[..., None], texture[cy, cx], base_px)[1:-1, 1:-1]
 
     by_index_differs = 0
     for f in case["frames"]:
         k = math.floor((f - START) / 24 * doc["fps"] + 1e-9)
         cell = doc["frames"][k]
-        shown = _read(results["renders"]["atlas24"][str(f)])[1:-1, 1:-1]
+        shown = _read(results["renders"][name][str(f)])[1:-1, 1:-1]
         diffs = {c: np.abs(shown[OPAQUE:, :, :3] - frame_of(c)[OPAQUE:, :, :3]).mean() for c in set(doc["frames"])}
         assert min(diffs, key=diffs.get) == cell, (f, k, cell, sorted(diffs.items(), key=lambda x: x[1])[:3])
         # Closest sampling and a region mask: the render is the schema's frame, pixel for pixel
