@@ -165,4 +165,7 @@ for case in cfg["cases"]:
                 values[str(f)] = obj.pose.bones["jaw"].location[2]
         results["values"][case["name"]] = values
 
+registered = hasattr(bpy.types, "LIPSYNC_OT_import_render")
+bpy.ops.preferences.addon_disable(module="lipsync_blender")
+results["unregistered"] = registered and not hasattr(bpy.types, "LIPSYNC_OT_import_render")
 json.dump(results, open(f"{out}/results.json", "w"), indent=1)

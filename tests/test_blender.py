@@ -138,6 +138,7 @@ def test_the_addon_is_installed_from_lipsyncs_zip(run):
     tmp, _, results = run
     assert Path(results["module_file"]).parent == tmp / "scripts" / "addons" / "lipsync_blender"
     assert results["lipsync_importable"] is False  # it ran on Blender's Python alone
+    assert results["unregistered"]  # disabling it removes its operators
     names = zipfile.ZipFile(tmp / "lipsync_blender.zip").namelist()
     assert {Path(n).name for n in names} == {p.name for p in (tmp / "scripts/addons/lipsync_blender").glob("*.py")}
 
