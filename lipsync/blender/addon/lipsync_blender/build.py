@@ -1,6 +1,5 @@
 """The Blender side: planes, materials, constant keys, sound strips (the rule is in files.py)."""
 
-import math
 import os
 
 import bpy

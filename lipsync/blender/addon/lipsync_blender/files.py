@@ -42,7 +42,7 @@ class LipsyncFileError(ValueError):
     """A file lipsync did not write, or wrote differently; the message names it."""
 
 
-class Sequence_(NamedTuple):
+class PngSequence(NamedTuple):
     """A PNG sequence: its folder, the frame numbers in order and their file names."""
 
     folder: str
@@ -117,7 +117,7 @@ def _read_json(path: str) -> dict:
     return doc
 
 
-def png_sequence(path: str) -> Sequence_:
+def png_sequence(path: str) -> PngSequence:
     """The lipsync PNG sequence in ``path`` (a folder, or any of its frames).
 
     Frames are ``frame_NNNNNN.png`` numbered from 0 without gaps, as ``lipsync render -o
@@ -137,7 +137,7 @@ def png_sequence(path: str) -> Sequence_:
         if n != numbers[0] + i:
             raise LipsyncFileError(f"{folder}: frame {numbers[0] + i} is missing (the frames after it would "
                                    "show at the wrong time)")
-    return Sequence_(os.path.abspath(folder), numbers, tuple(n for _, n in found))
+    return PngSequence(os.path.abspath(folder), numbers, tuple(n for _, n in found))
 
 
 def atlas_clip(frames_path: str) -> AtlasClip:
