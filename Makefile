@@ -4,7 +4,7 @@ VENV    := .venv
 BIN     := $(VENV)/bin
 STAMP   := $(VENV)/.installed
 
-.PHONY: test test-browser demo bench fuzz docs-images clean install
+.PHONY: test test-browser test-blender demo bench fuzz docs-images clean install
 
 # The compiled frame kernel is built by the editable install: a changed source rebuilds it.
 # compileall: an editable install leaves no bytecode, and where PYTHONDONTWRITEBYTECODE is
@@ -34,6 +34,12 @@ test-browser: $(STAMP)
 	@if [ ! -x /usr/bin/chromium ] || [ ! -x /usr/bin/chromedriver ]; then \
 		apt-get update && apt-get install -y chromium chromium-driver; fi
 	$(BIN)/python -m pytest -q -s -p no:cacheprovider tests/test_browser_editor.py
+
+# The Blender add-on in real headless Blender (also part of `make test` when blender is
+# present). Installs Debian's blender first, only if it is missing.
+test-blender: $(STAMP)
+	@if ! command -v blender >/dev/null; then apt-get update && apt-get install -y blender; fi
+	$(BIN)/python -m pytest -q -s -p no:cacheprovider tests/test_blender.py
 
 fuzz: $(STAMP)
 	HYPOTHESIS_PROFILE=fuzz $(BIN)/python -m pytest -q -p no:cacheprovider tests/test_fuzz.py

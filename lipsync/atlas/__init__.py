@@ -32,14 +32,15 @@ def __getattr__(name):
 
 
 def player_files():
-    """Paths of the player page's files (``player.html``, ``player.js``), shipped with lipsync.
+    """Paths of the example players, shipped with lipsync: the page (``player.html``,
+    ``player.js``) and the Godot 3 script (``lipsync_player.gd``).
 
     Examples
     --------
     >>> sorted(p.name for p in player_files())
-    ['player.html', 'player.js']
+    ['lipsync_player.gd', 'player.html', 'player.js']
     """
     from pathlib import Path
 
     static = Path(__file__).with_name("static")
-    return [static / "player.html", static / "player.js"]
+    return [static / "player.html", static / "player.js", static / "lipsync_player.gd"]

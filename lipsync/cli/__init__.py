@@ -35,6 +35,7 @@ _COMMAND_MODULES = [
     "morph",
     "serve",
     "batch",
+    "blender_addon",  # `lipsync blender-addon`: a command's dashes are underscores in its module name
 ]
 
 
@@ -67,8 +68,8 @@ def build_parser(argv: Optional[List[str]] = None) -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
     names = _COMMAND_MODULES
-    if argv and argv[0] in _COMMAND_MODULES:
-        names = [argv[0]]
+    if argv and argv[0].replace("-", "_") in _COMMAND_MODULES:
+        names = [argv[0].replace("-", "_")]
     for name in names:
         try:
             module = importlib.import_module(f".{name}", __package__)

@@ -7,7 +7,7 @@ changes). The pairs are those the given timelines use (read, mapped and planned 
 ``render`` does them: the boundaries of the sequencer's plan, and with the dominance timing
 the pairs its frames blend) or, with ``--pairs all`` or no timeline, every pair of the bank.
 ``lipsync cues TIMELINE --format atlas --atlas ATLAS.json --fps F`` then gives the cell of
-every frame. ``--player`` puts the example player page beside the atlas.
+every frame. ``--player`` puts the example players beside the atlas (the page, the Godot 3 script).
 """
 
 from __future__ import annotations
@@ -48,7 +48,8 @@ def add_parser(sub) -> None:
     p.add_argument("--no-crop", dest="crop", action="store_false",
                    help="cells are whole frames (default: only the region that changes, plus ATLAS.base.png)")
     p.add_argument("--player", action="store_true",
-                   help="also write player.html and player.js (the example player) beside the atlas")
+                   help="also write the example players beside the atlas: player.html and player.js (a web "
+                        "page), lipsync_player.gd (Godot 3)")
     add_store_option(p)
     add_jobs_option(p)
     add_quiet_option(p)
