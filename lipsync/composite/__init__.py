@@ -2,6 +2,8 @@
 
 * :mod:`lipsync.composite.sprites` -- a drawn mouth onto a character's body, a background,
   or as it is (bank.yaml ``composite:``, ``lipsync render --over``).
+* :mod:`lipsync.composite.face` -- one face: a lower face (mouth, jaw, chin) pasted onto a
+  plate picture (the lower-face mask, the pose and colour match, the blend).
 
 The names below are the ones ``lipsync.composite`` has always had.
 """
