@@ -269,6 +269,19 @@ def skin_ring(mask: np.ndarray, width: float) -> np.ndarray:
     return (outside > 0) & (dist <= max(width, 1.0))
 
 
+def face_area(points: np.ndarray, shape: Tuple[int, int]) -> np.ndarray:
+    """Boolean ``(H, W)``: inside the face's outline (the jaw and the upper outline of a
+    468-point mesh): the skin ring is matched on skin, not on the background or a collar
+    beside the jaw."""
+    import cv2
+
+    p = np.asarray(points, np.float64)[:, :2]
+    outline = np.vstack([p[list(T.JAW_L)], p[list(T.JAW_R[::-1])], p[list(T.FACE_UPPER_R)], p[list(T.FACE_UPPER_L[::-1])]])
+    area = np.zeros(shape, np.uint8)
+    cv2.fillPoly(area, [np.round(outline * 16).astype(np.int32)], 1, shift=4)
+    return area.astype(bool)
+
+
 def colour_match(source: np.ndarray, target: np.ndarray, where: np.ndarray, *, offset: bool = False
                  ) -> Tuple[np.ndarray, np.ndarray]:
     """Per-channel ``gain, offset`` (each ``(3,)``) bringing ``source``'s pixels in ``where`` to
@@ -414,6 +427,6 @@ def onto_plate(plate: np.ndarray, plate_points: np.ndarray, image: np.ndarray, p
     merged = merged_by(mask_from_mesh([p, q], (h, w)))
     mask = mask_from_mesh([p, merged], (h, w))
     d = float(eye_distance(p))
-    gain, offset = colour_match(image, plate, skin_ring(mask, RING * d))
+    gain, offset = colour_match(image, plate, skin_ring(mask, RING * d) & face_area(p, (h, w)))
     out = paste(plate, apply_colour(image, gain, offset), mask, method=method)
     return Pasted(image=out, points=merged, mask=mask, gain=gain, offset=offset)
