@@ -87,6 +87,18 @@ OPENING_WEIGHT = 1.0
 #: slightly-open B (kphotoalbum's demo webcam clip, tools/other_face.py: 0.049 against 0.044
 #: eye distances).
 CLOSURE_OPENING_PERCENTILE = 10
+#: The speaker's range (issue 28): the percentile of its candidates' lip openings an open
+#: shape's picture is chosen near, by Rhubarb shape (other maps' visemes through their
+#: Rhubarb twins); shapes not named take the median. A viseme's candidates are every
+#: instance of it in every context; the renderer reaches a picture only at the middle of a
+#: held sound and coarticulation pulls it towards its neighbours (lipsync.coarticulation),
+#: so median pictures render a mouth that opens about two thirds as wide as the speaker's
+#: (GRID s1, 30 held-out sentences: predicted std ratio 0.67 with the dominance timing).
+#: The 75th percentile of the open shapes predicted 1.02 with r unchanged (0.777 against
+#: 0.779); the 85th and 90th over-open (1.33, 1.44) and r starts to fall (0.773, 0.765).
+#: F (rounded), G (F/V) and X (rest) keep the median: their opening is not what they show.
+OPENING_PERCENTILE = {"B": 75, "C": 75, "D": 75, "E": 75, "H": 75}
+
 #: A frame at half the sharpness of the viseme's sharpest finalist costs half a spread.
 SHARPNESS_WEIGHT = 1.0
 #: Eyes half as open as usual (but not a blink) cost this much.
@@ -224,23 +236,31 @@ class FrameMeasures:
 
 
 def rank(cands: Sequence[Candidate], measures: Sequence[FrameMeasures], *,
-         closures: Sequence[str] = ()) -> Dict[str, List[Candidate]]:
+         closures: Sequence[str] = (), span: bool = False) -> Dict[str, List[Candidate]]:
     """Candidates scored and sorted best first, per viseme (blinks left out when a viseme has
     other candidates). ``closures``: visemes whose pictures must show closed lips
-    (:data:`CLOSURE_OPENING_PERCENTILE`)."""
+    (:data:`CLOSURE_OPENING_PERCENTILE`). ``span``: open shapes are judged against a high
+    percentile of their candidates' openings (:data:`OPENING_PERCENTILE`), and their
+    typical shape is the median of the candidates opened about as wide."""
     by: Dict[str, List[Candidate]] = {}
     for c in cands:
         by.setdefault(c.viseme, []).append(c)
     out = {}
     for v, group in by.items():
         shapes = np.stack([measures[c.video].shape[c.frame] for c in group])
-        dist = np.linalg.norm(shapes - np.median(shapes, axis=0), axis=1)
-        typ = dist / max(float(np.median(dist)), 1e-9)
         opening = np.array([measures[c.video].opening[c.frame] for c in group])
         median = float(np.median(opening))
         mad = max(float(np.median(np.abs(opening - median))), 1e-6)
         # a closure: an opening one of its candidates has (the lowest of a few, a low one of many)
         mid = float(np.percentile(opening, CLOSURE_OPENING_PERCENTILE, method="lower")) if v in closures else median
+        like = np.ones(len(group), bool)
+        if span and v not in closures and rhubarb_shape(v) in OPENING_PERCENTILE:
+            mid = float(np.percentile(opening, OPENING_PERCENTILE[rhubarb_shape(v)], method="nearest"))
+            # the typical shape of the wide-open instances, not of all of them
+            near = np.abs(opening - mid) <= mad
+            like = near if near.sum() >= 3 else like
+        dist = np.linalg.norm(shapes - np.median(shapes[like], axis=0), axis=1)
+        typ = dist / max(float(np.median(dist)), 1e-9)
         scored = []
         for c, t, o in zip(group, typ, opening):
             m = measures[c.video]
