@@ -56,9 +56,10 @@ class VideoBankConfig:
         lower face, with the chosen frame's mouth, jaw and chin pasted in
         (:mod:`lipsync.composite.face`); off: each picture is its own whole frame.
     span : bool
-        Pictures span the speaker's range: an open shape's picture is chosen near a high
-        percentile of its candidates' lip openings (:data:`lipsync.videobank.select.OPENING_PERCENTILE`),
-        not their median; off: the median (closures are the closed ones either way).
+        Pictures span the speaker's range: an open shape's picture is chosen near its
+        candidates' median lip opening moved further from the rest's
+        (:data:`lipsync.videobank.select.SPAN_GAIN`); off: near the median (closures are the
+        closed ones either way).
     """
 
     map: str = DEFAULT_MAP
