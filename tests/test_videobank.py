@@ -286,8 +286,8 @@ def test_pictures_span_the_speakers_range(made, mesh):
     # only 3-14 instances in two sentences: one rank alone is coarse); median pictures were
     # at about one half
     assert np.mean([rank[v] for v in "BCDH"]) >= 0.65, rank
-    # closed lips for P B M, relaxed at rest
-    assert rank["A"] <= 0.5 and rank["X"] <= 0.75, rank
+    # closed lips for P B M; at rest relaxed, not the parted-lips tail of the pauses
+    assert rank["A"] <= 0.5 and rank["X"] <= 0.9, rank
     # and the widest picture reaches the wide end of what the speaker shows (all open shapes)
     wide = np.concatenate([seen[v] for v in "CDH"])
     assert max(png[v] for v in "CDH") >= np.percentile(wide, 80), (png, np.percentile(wide, [50, 80, 90]))
