@@ -97,8 +97,8 @@ def lower_face_polygon(jaw_l: np.ndarray, jaw_r: np.ndarray, nose_base_l: np.nda
     nose_base_l, nose_base_r : numpy.ndarray
         ``(M, 2)`` the nose's lower edge from each wing to the point under the tip.
     grow : float
-        Pixels the jaw and chin are pushed outwards (each point along the jaw's outward
-        normal; the two ends at the wings' level sideways, keeping the top edge's height).
+        Pixels the chin is pushed outwards along the jaw's outward normal; the jaw's points
+        less, in proportion to their depth below the wings' level (none at that level).
 
     Returns
     -------
@@ -128,9 +128,12 @@ def lower_face_polygon(jaw_l: np.ndarray, jaw_r: np.ndarray, nose_base_l: np.nda
         normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-12)
         centre = np.vstack([nl, nr]).mean(axis=0)
         normal *= np.where(((jaw - centre) * normal).sum(axis=1, keepdims=True) < 0, -1.0, 1.0)
-        jaw = jaw + grow * normal
-        jaw[0] = left[0] - grow * across
-        jaw[-1] = right[0] + grow * across
+        # full growth at the chin, none at the wings' level: beside the cheeks the face's
+        # edge meets the background, and a frame's edge a pixel or two off the plate's would
+        # paste a sliver of skin onto it
+        depth = jaw @ down - level
+        taper = np.clip(depth / max(float(depth.max()), 1e-9), 0.0, 1.0)[:, None]
+        jaw = jaw + grow * taper * normal
     return np.vstack([jaw, nr, nl[::-1][1:]])
 
 
