@@ -264,7 +264,14 @@ def pose_onto(points: np.ndarray, target: np.ndarray, *, anchors: Sequence[int] 
 
 
 def skin_ring(mask: np.ndarray, width: float) -> np.ndarray:
-    """Boolean ``(H, W)``: pixels outside ``mask`` (0 there) within ``width`` pixels of it."""
+    """Boolean ``(H, W)``: pixels outside ``mask`` (0 there) within ``width`` pixels of it.
+
+    Examples
+    --------
+    >>> m = np.zeros((9, 9), np.float32); m[4, 4] = 1.0
+    >>> skin_ring(m, 1.0).sum(), bool(skin_ring(m, 1.0)[4, 4])      # the 4 neighbours, not the centre
+    (np.int64(4), False)
+    """
     import cv2
 
     outside = (mask <= 0).astype(np.uint8)
@@ -321,7 +328,13 @@ def colour_match(source: np.ndarray, target: np.ndarray, where: np.ndarray, *, o
 
 
 def apply_colour(image: np.ndarray, gain: np.ndarray, offset: np.ndarray) -> np.ndarray:
-    """``image`` (uint8, RGB or RGBA) with ``gain * value + offset`` per colour channel (a lookup table)."""
+    """``image`` (uint8, RGB or RGBA) with ``gain * value + offset`` per colour channel (a lookup table).
+
+    Examples
+    --------
+    >>> apply_colour(np.full((1, 1, 4), 100, np.uint8), np.array([1.1, 1.0, 0.5]), np.zeros(3))[0, 0].tolist()
+    [110, 100, 50, 100]
+    """
     lut = np.clip(np.round(np.arange(256)[:, None] * np.asarray(gain)[None, :] + np.asarray(offset)[None, :]),
                   0, 255).astype(np.uint8)
     out = image.copy()
