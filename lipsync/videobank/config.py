@@ -51,6 +51,15 @@ class VideoBankConfig:
         Processes for the flows (default: all cores).
     flows : bool
         Compute the flows (a bank ready to render); off only for tests of the other steps.
+    one_face : bool
+        Every viseme's picture is the rest picture (the *plate*, eyes open) outside the
+        lower face, with the chosen frame's mouth, jaw and chin pasted in
+        (:mod:`lipsync.composite.face`); off: each picture is its own whole frame.
+    span : bool
+        Pictures span the speaker's range: an open shape's picture is chosen near its
+        candidates' median lip opening moved further from the rest's
+        (:data:`lipsync.videobank.select.SPAN_GAIN`); off: near the median (closures are the
+        closed ones either way).
     """
 
     map: str = DEFAULT_MAP
@@ -60,6 +69,8 @@ class VideoBankConfig:
     quiet: bool = True
     jobs: Optional[int] = None
     flows: bool = True
+    one_face: bool = True
+    span: bool = True
 
     def __post_init__(self):
         if self.size is not None:

@@ -41,8 +41,8 @@ from typing import Optional, Sequence, Tuple, Union
 import cv2
 import numpy as np
 
-from .alpha import flatten, has_alpha, over, resize_rgba
-from .errors import InputError
+from ..alpha import flatten, has_alpha, over, resize_rgba
+from ..errors import InputError
 
 __all__ = ["Composite", "Compositor", "DEFAULT_BACKGROUND", "MAX_SCALE", "parse_at", "check_placement"]
 
