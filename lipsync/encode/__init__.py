@@ -10,7 +10,7 @@ module         name: extensions    alpha  output
                                           ``format="mp4"``)
 :mod:`.png`    png: a folder        yes   ``frame_000000.png`` ... (no audio)
 :mod:`.webm`   webm: .webm          yes   VP9 (``yuva420p``), Opus audio
-:mod:`.mov`    mov: .mov            yes   ProRes 4444 (``yuva444p10le``), PCM audio
+:mod:`.mov`    mov: .mov            yes   ProRes 4444 (``yuva444p12le``), PCM audio
 :mod:`.mov`    qtrle                yes   QuickTime Animation (lossless RLE), PCM audio
 :mod:`.webp`   webp: .webp          yes   animated WebP, looping (no audio)
 :mod:`.gif`    gif: .gif            1-bit animated GIF, one palette, looping (no audio)
