@@ -314,7 +314,7 @@ def render_clip(timeline, output: PathLike, *, bank=None, audio: Optional[PathLi
 def write_video(frames, output: PathLike, *, fps: Optional[float] = None, audio: Optional[PathLike] = None,
                 format: Optional[str] = None, crf: int = DEFAULT_CRF, preset: str = DEFAULT_PRESET,
                 background=(255, 255, 255), quiet: bool = True) -> str:
-    """Write frames to a video, an animation or a folder of PNGs, in one call.
+    r"""Write frames to a video, an animation or a folder of PNGs, in one call.
 
     The frames' size and channels come from the first frame. The file is written under a
     temporary name and renamed when complete: an exception (or Ctrl-C) while the frames are
@@ -356,7 +356,6 @@ def write_video(frames, output: PathLike, *, fps: Optional[float] = None, audio:
     --------
     >>> import os, tempfile
     >>> from lipsync import Animator, read_timeline, write_video
-    >>> from lipsync._data import data_dir
     >>> d = tempfile.mkdtemp()
     >>> tl = os.path.join(d, "a.tsv")
     >>> _ = open(tl, "w").write("0.00\tX\n0.20\tD\n0.60\tX\n")
