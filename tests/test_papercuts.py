@@ -258,3 +258,16 @@ def test_docs_name_the_mov_pixel_format_the_file_has(tmp_path):
 def test_toolchains_says_how_frame_numbers_meet_blenders():
     text = (ROOT / "docs" / "toolchains.md").read_text(encoding="utf-8")
     assert re.search(r"`frame_000000\.png` shows time 0 s.*?Blender frame NNNNNN \+ 1", text, re.S)
+
+
+def test_a_batch_manifest_names_a_shipped_subject(tmp_path):
+    from lipsync._data import shipped_banks
+    from lipsync.batch.manifest import ManifestError, read_manifest
+
+    (tmp_path / "a.tsv").write_text("0.00\tX\n0.40\tD\n0.80\tX\n")
+    (tmp_path / "m.csv").write_text("input,output,bank\na.tsv,a.mp4,grid-s1\na.tsv,b.mp4,\n")
+    jobs = read_manifest(tmp_path / "m.csv")
+    assert jobs[0].bank == shipped_banks()["grid-s1"].resolve() and jobs[1].bank.name == "toon"
+    (tmp_path / "n.csv").write_text("input,output,bank\na.tsv,a.mp4,no-such-subject\n")
+    with pytest.raises(ManifestError, match="no-such-subject"):
+        read_manifest(tmp_path / "n.csv")
