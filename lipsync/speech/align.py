@@ -100,12 +100,14 @@ BOUNDARY_OFFSET_S = 0.0
 
 #: Below this confidence a transcript is reported as not fitting the audio.
 LOW_CONFIDENCE = 0.5
-#: Below this confidence the transcript does not fit at all (TranscriptMismatchWarning; an
-#: error on the command line without --allow-mismatch). GRID s1, 40 sentences: their own
-#: transcripts score 0.60 and up (none refused); another sentence's transcript (one each)
-#: scores below it 34 times of 40 (median 0.00, highest 0.41); with one word added 5 of 40
-#: do, with the letter left out 1 of 40 (those stay warnings above it: a transcript that is
-#: nearly right is still worth aligning).
+#: Below this confidence, with words of it not found, the transcript does not fit at all
+#: (TranscriptMismatchWarning; an error on the command line without --allow-mismatch). A
+#: transcript all of whose words were found but that covers little of the speech (a
+#: partial one) stays an AlignmentWarning. GRID s1, 40 sentences: their own transcripts
+#: score 0.60 and up (none refused); another sentence's transcript (one each) is refused 31
+#: times of 40 (median confidence 0.00, highest 0.41); one word added 4, the letter left
+#: out 1, the first two words alone 0 (those stay warnings: a transcript that is nearly
+#: right, or right but partial, is still worth aligning).
 NO_FIT_CONFIDENCE = 0.25
 #: Below this acoustic fit (:func:`_acoustic_fit`) a transcript whose words all aligned is
 #: taken as not what was said, and the relaxed search looks for the words that are there.
@@ -987,7 +989,10 @@ def align_samples(pcm: np.ndarray, text: Optional[str] = None, *, quiet: bool = 
             warnings.warn(f"{path or 'audio'}: the transcript {what} (confidence {confidence:.2f}: the "
                           "smallest of the share of its words found, the share of the speech they cover "
                           "and how well they match the sounds)",
-                          TranscriptMismatchWarning if confidence < NO_FIT_CONFIDENCE else AlignmentWarning,
+                          # all its words found but little of the speech covered: a partial
+                          # transcript, worth aligning; words not found as well: the wrong one
+                          TranscriptMismatchWarning if confidence < NO_FIT_CONFIDENCE and (failed or skipped)
+                          else AlignmentWarning,
                           stacklevel=2)
     return _to_alignment(timings, duration, path, transcript if has_text else tuple(w for w, *_ in timings),
                          recognised=not has_text or failed > 0, confidence=confidence, missing=missing,
