@@ -49,6 +49,9 @@ autodoc_member_order = "bysource"
 autodoc_typehints = "none"   # the numpydoc sections say the types in words
 autodoc_default_options = {"members": False}
 
+# Option names stay as typed (--lang, not an en dash).
+smartquotes = False
+
 html_theme = "furo"
 html_title = "lipsync"
 html_static_path: list = []
