@@ -50,7 +50,8 @@ def cli_page() -> str:
              "(the message names the file and, where it applies, the line), 130 Ctrl-C, 143 SIGTERM, "
              "1 anything else.", ""]
     for name, short, sub in _subparsers(build_parser()):
-        lines += [f"## lipsync {name}", "", _cell(short or "").rstrip(".") + ".", ""]
+        short = _cell(short or "").rstrip(".")
+        lines += [f"## lipsync {name}", "", short[:1].upper() + short[1:] + ".", ""]
         if sub.description:
             lines += [sub.description, ""]
         lines += ["```text", sub.format_usage().strip(), "```", "",
