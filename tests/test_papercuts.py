@@ -48,6 +48,14 @@ def test_a_file_that_is_not_a_transcript_is_refused_naming_it(capsys, tmp_path, 
     assert not out.exists()
 
 
+def test_render_with_a_label_track_as_text_stops_before_any_work(capsys, tmp_path):
+    # the command: render hello.wav --text hello.txt read 539 "words" and exited 0
+    out = tmp_path / "hello.mp4"
+    code, err = run(capsys, "render", SAMPLES / "hello.wav", "--text", SAMPLES / "hello.txt", "-o", out)
+    assert code == 2 and f"{SAMPLES / 'hello.txt'}: given as a transcript" in err
+    assert not out.exists() and list(tmp_path.iterdir()) == []
+
+
 def test_a_transcript_file_with_markup_or_nul_bytes_is_refused(tmp_path):
     from lipsync.errors import InputError
     from lipsync.speech.align import read_transcript
