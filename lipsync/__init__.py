@@ -40,6 +40,8 @@ _EXPORTS = {
     "morph": "render",
     "Animator": "animator",
     "LiveAnimator": "live",
+    "render_clip": "clip",
+    "write_video": "clip",
 }
 _SUBMODULES = {"warp", "bank", "normalise", "flows", "store", "render", "timeline", "phonemes",
                "sequencer", "timing", "coarticulation", "encode", "animator", "registry", "errors", "cli", "preview", "clip", "live",

@@ -25,3 +25,15 @@ DEFAULT_BANK_NAME = "toon"
 def default_bank_dir() -> Path:
     """The default subject's bank folder."""
     return data_dir("visemes") / DEFAULT_BANK_NAME
+
+
+def shipped_banks() -> dict:
+    """The subjects shipped with lipsync: name -> bank folder (those holding a bank.yaml).
+
+    Examples
+    --------
+    >>> sorted(shipped_banks())
+    ['grid-s1', 'toon']
+    """
+    root = data_dir("visemes")
+    return {p.name: p for p in sorted(root.iterdir()) if (p / "bank.yaml").is_file()}

@@ -382,7 +382,8 @@ class Bank:
         Parameters
         ----------
         path : path-like
-            The bank folder, or the path of its ``bank.yaml``.
+            The bank folder, or the path of its ``bank.yaml``, or the name of a shipped
+            subject (``"toon"``, ``"grid-s1"``; see :func:`bank_path`).
 
         Returns
         -------
@@ -395,11 +396,12 @@ class Bank:
 
         Examples
         --------
-        >>> from lipsync._data import default_bank_dir
-        >>> Bank.load(default_bank_dir()).shape
+        >>> Bank.load("toon").shape                  # a shipped subject, by name
         (512, 512)
+        >>> Bank.load("grid-s1").rest
+        'X'
         """
-        return _load(Path(path))
+        return _load(bank_path(path))
 
     @classmethod
     def from_text(cls, text: str, folder: Union[str, os.PathLike], *,
@@ -617,6 +619,50 @@ def _png_size(path: Path) -> Optional[Tuple[int, int]]:
     if len(head) == 24 and head[:8] == b"\x89PNG\r\n\x1a\n" and head[12:16] == b"IHDR":
         return int.from_bytes(head[16:20], "big"), int.from_bytes(head[20:24], "big")
     return None
+
+
+def bank_path(name_or_path: Union[str, os.PathLike]) -> Path:
+    """The folder (or bank.yaml) a ``--bank`` value means: a path, or a shipped subject's name.
+
+    What exists on disk wins: a folder or file of that name is used as it is. A bare name
+    (no folder separator, no extension) that is not on disk is a shipped subject
+    (``toon``, ``grid-s1``); an unknown one is an error listing the shipped subjects.
+
+    Parameters
+    ----------
+    name_or_path : str or path-like
+
+    Returns
+    -------
+    pathlib.Path
+
+    Raises
+    ------
+    BankError
+        A bare name that is neither on disk nor shipped.
+
+    Examples
+    --------
+    >>> bank_path("toon").name, (bank_path("toon") / "bank.yaml").is_file()
+    ('toon', True)
+    >>> bank_path("visemes/mine").as_posix()
+    'visemes/mine'
+    """
+    path = Path(name_or_path)
+    text = os.fspath(name_or_path)
+    if path.exists() or not _SUBJECT_NAME.match(text):
+        return path
+    from ._data import shipped_banks
+
+    shipped = shipped_banks()
+    if text in shipped:
+        return shipped[text]
+    raise BankError(f"no such folder, and no shipped subject of that name (shipped: {', '.join(shipped)}; "
+                    f"or give a bank folder's path)", path=text)
+
+
+# A --bank value that could be a shipped subject's name: one path component, no extension.
+_SUBJECT_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_-]{0,63}$")
 
 
 def _load(path: Path) -> Bank:

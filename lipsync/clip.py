@@ -311,6 +311,95 @@ def render_clip(timeline, output: PathLike, *, bank=None, audio: Optional[PathLi
                       seconds_setup=t1 - t0, seconds_render=t2 - t1)
 
 
+def write_video(frames, output: PathLike, *, fps: Optional[float] = None, audio: Optional[PathLike] = None,
+                format: Optional[str] = None, crf: int = DEFAULT_CRF, preset: str = DEFAULT_PRESET,
+                background=(255, 255, 255), quiet: bool = True) -> str:
+    r"""Write frames to a video, an animation or a folder of PNGs, in one call.
+
+    The frames' size and channels come from the first frame. The file is written under a
+    temporary name and renamed when complete: an exception (or Ctrl-C) while the frames are
+    produced leaves nothing at ``output``.
+
+    Parameters
+    ----------
+    frames : Animator or iterable of numpy.ndarray
+        An :class:`lipsync.Animator` (its frames, at its frame rate), or ``uint8`` frames
+        ``(H, W, 3)`` RGB or ``(H, W, 4)`` RGBA, all of one size.
+    output : path-like
+        ``.mp4`` (also ``.m4v``, ``.mkv``), ``.webm``, ``.mov``, ``.webp``, ``.gif``, or a
+        folder (``"frames/"``) for numbered PNGs; see :data:`lipsync.encode.ENCODERS`.
+    fps : float, optional
+        Frames per second (default: the Animator's, else 25).
+    audio : path-like, optional
+        Sound to mux (mp4, webm, mov), padded or cut to the video's length.
+    format : str, optional
+        An encoder name, when ``output``'s extension does not say it.
+    crf, preset
+        x264 quality and speed (mp4), as for :func:`render_clip`.
+    background : colour, optional
+        RGBA frames written to a format without alpha (mp4) are flattened onto this
+        ``(r, g, b)`` (default white).
+    quiet : bool
+        No progress counter (the default).
+
+    Returns
+    -------
+    str
+        ``output``.
+
+    Raises
+    ------
+    ValueError
+        No frames, or frames that are not ``uint8`` ``(H, W, 3|4)`` of one size.
+
+    Examples
+    --------
+    >>> import os, tempfile
+    >>> from lipsync import Animator, read_timeline, write_video
+    >>> d = tempfile.mkdtemp()
+    >>> tl = os.path.join(d, "a.tsv")
+    >>> _ = open(tl, "w").write("0.00\tX\n0.20\tD\n0.60\tX\n")
+    >>> anim = Animator("toon", read_timeline(tl), fps=25)
+    >>> out = write_video(anim, os.path.join(d, "hello.mp4"))
+    >>> os.path.getsize(out) > 1000
+    True
+    """
+    import numpy as np
+
+    from .encode import format_for, has_alpha, open_writer
+
+    if hasattr(frames, "frames") and hasattr(frames, "specs"):  # an Animator
+        fps = frames.fps if fps is None else fps
+        count = len(frames)
+        frames = frames.frames(copy=False)
+    else:
+        count = len(frames) if hasattr(frames, "__len__") else None
+        fps = DEFAULT_FPS if fps is None else fps
+    it = iter(frames)
+    first = next(it, None)
+    if first is None:
+        raise ValueError(f"{output}: no frames to write")
+    first = np.asarray(first)
+    if first.dtype != np.uint8 or first.ndim != 3 or first.shape[2] not in (3, 4):
+        raise ValueError(f"{output}: frames must be uint8 arrays (H, W, 3) or (H, W, 4), "
+                         f"got {first.dtype} {first.shape}")
+    h, w, channels = first.shape
+    name = format or format_for(output)
+    flatten = channels == 4 and not has_alpha(name)
+    if flatten:
+        from .alpha import flatten as flatten_onto
+
+    def frames_out():
+        yield first
+        yield from it
+
+    with open_writer(output, fps=fps, size=(w, h), format=name, audio=audio, crf=crf, preset=preset,
+                     quiet=quiet, total=count, frames=count, channels=3 if flatten else channels) as writer:
+        for frame in frames_out():
+            writer.write(flatten_onto(frame, background) if flatten else frame)
+    return os.fspath(output)
+
+
 # --------------------------------------------------------------------------- options
 
 def load_background(spec: str):

@@ -43,6 +43,17 @@ class InputError(ValueError):
         super().__init__(where + message)
 
 
+class TranscriptMismatch(UserWarning):
+    """A transcript that does not fit its speech at all (the aligner's confidence is below
+    :data:`lipsync.speech.align.NO_FIT_CONFIDENCE`).
+
+    The library warns (:class:`lipsync.speech.align.TranscriptMismatchWarning`, also an
+    ``AlignmentWarning``); the command line makes it an error (exit 2) unless
+    ``--allow-mismatch`` is given. Defined here so the CLI can name it without loading
+    the aligner.
+    """
+
+
 class BankError(InputError):
     """A viseme bank (``bank.yaml`` or its images) is invalid."""
 

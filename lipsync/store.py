@@ -12,8 +12,8 @@ Storage, per entry (``<store>/flows/<key>.flow``, one flat file, memory-mapped w
   parts of the face exactly still;
 * each field is cropped to the box where its displacement is non-zero, the box made
   symmetric about the axis when the lines are, and then only its left half kept;
-* values are float16 displacements: for |d| < 64 px the rounding error is at most
-  2**-11 * |d| <= 0.031 px (<= 0.004 px for |d| < 8 px), well under bilinear sampling's
+* values are float16 displacements: for ``|d| < 64`` px the rounding error is at most
+  ``2**-11 * |d| <= 0.031`` px (``<= 0.004`` px for ``|d| < 8`` px), well under bilinear sampling's
   own error, at half the bytes of float32;
 * the **inverse maps** every frame needs (:func:`lipsync.flows.inverse_tables`): for each
   side, the displacement ``X - Y`` with ``X + t F(X) = Y`` at ``t = k / TABLE_STEPS``, on

@@ -12,7 +12,7 @@ For a destination pixel X and a line pair (PQ in the destination, P'Q' in the so
     X_src = X + Σ weight·(X' - X) / Σ weight
 
 The kernel works on the displacement ``X' - X`` written as ``(P'-P) + u·(e'-e) + v·(n'-n)``
-(e = Q-P, n = perp(e)/|e|; primes for the source line). That form is exactly zero when a
+(``e = Q-P``, ``n = perp(e)/|e|``; primes for the source line). That form is exactly zero when a
 line does not move, so identical line sets give the identity map without rounding noise,
 and it is affine in (x, y): per line every quantity is a sum of a row part and a column
 part, so a pixel costs adds, one square root and one division per line.

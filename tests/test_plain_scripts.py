@@ -1,6 +1,7 @@
 """Library calls from plain scripts (issue 19, item 1).
 
-The README's Python examples are copied, as a new user would, into a script *without*
+The documentation's Python examples (README.md and docs/*.md) are copied, as a new user
+would, into a script *without*
 ``if __name__ == "__main__":`` and run in a fresh interpreter on a copy of the toon that has
 no flows yet (no ``.lipsync/``). A library that starts a multiprocessing ``spawn`` pool
 re-imports the caller's main module in every child: the script then runs again in each
@@ -21,23 +22,29 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
+#: The pages' headings above the embedding and live examples (docs/embed.md, docs/serve.md).
+EMBEDDING = "Embed lipsync in an app"
+LIVE = "Go live: LiveAnimator and `lipsync serve`"
 
 
 def readme_examples():
-    """The README's ```python blocks, keyed by the heading they sit under."""
+    """The ```python blocks of README.md and docs/*.md, keyed by the heading they sit under
+    (the first block under each heading). A shipped subject named in an example
+    (``Bank.load("toon")``) is pointed at the test's copy without flows, ``visemes/toon``."""
     blocks = {}
-    heading, fence, body = "", None, []
-    for line in (ROOT / "README.md").read_text(encoding="utf-8").splitlines(keepends=True):
-        if fence is None and line.startswith("```"):
-            fence, body = line[3:].strip(), []
-        elif fence is not None and line.startswith("```"):
-            if fence == "python":
-                blocks[heading] = "".join(body)
-            fence = None
-        elif fence is not None:
-            body.append(line)
-        elif line.startswith("#"):
-            heading = line.lstrip("#").strip()
+    for page in [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]:
+        heading, fence, body = "", None, []
+        for line in page.read_text(encoding="utf-8").splitlines(keepends=True):
+            if fence is None and line.startswith("```"):
+                fence, body = line[3:].strip(), []
+            elif fence is not None and line.startswith("```"):
+                if fence == "python" and heading not in blocks:
+                    blocks[heading] = "".join(body).replace('"toon"', '"visemes/toon"')
+                fence = None
+            elif fence is not None:
+                body.append(line)
+            elif line.startswith("#"):
+                heading = line.lstrip("#").strip()
     return blocks
 
 
@@ -51,6 +58,7 @@ def workdir(tmp_path_factory):
     shutil.copytree(ROOT / "samples", d / "samples")
     (d / "tests" / "data" / "timelines").mkdir(parents=True)
     shutil.copy(ROOT / "tests/data/timelines/polly_mary_lamb.txt", d / "tests/data/timelines/")
+    shutil.copy(ROOT / "tests/data/timelines/polly_mary_lamb.txt", d / "marks.txt")
     shutil.copy(ROOT / "samples" / "hello.wav", d / "speech.wav")
     return d
 
@@ -70,12 +78,12 @@ def run_plain(workdir: Path, name: str, body: str, timeout: float = 600) -> subp
 
 
 def test_readme_has_the_examples():
-    assert {"Embedding", "Live talking heads"} <= set(readme_examples())
+    assert {EMBEDDING, LIVE} <= set(readme_examples())
 
 
 def test_live_animator_example_as_a_plain_script(workdir):
     # The issue's case: LiveAnimator on a bank with no flows computes all of them first.
-    body = readme_examples()["Live talking heads"] + textwrap.dedent("""
+    body = readme_examples()[LIVE] + textwrap.dedent("""
         assert frame.shape == (512, 512, 3) and frame.dtype.name == "uint8"
         print("stored", len(list((__import__("pathlib").Path("visemes/toon/.lipsync")).rglob("*.flow"))))
     """)
@@ -84,7 +92,7 @@ def test_live_animator_example_as_a_plain_script(workdir):
 
 
 def test_embedding_example_as_a_plain_script(workdir):
-    body = readme_examples()["Embedding"] + textwrap.dedent("""
+    body = readme_examples()[EMBEDDING] + textwrap.dedent("""
         assert still.shape == (512, 512, 3) and half.shape == (512, 512, 3)
         print("frames", len(anim))
     """)

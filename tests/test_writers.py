@@ -50,8 +50,10 @@ def test_golden_through_cli(expected: Path, tmp_path):
     stem, fmt = expected.name[: -len(".expected")].split(".", 1)
     source = CUES / f"{stem}.tsv"
     out = tmp_path / "out.cues"
-    assert main(["cues", str(source), "-o", str(out), "--format", fmt, "--quiet"]) == 0
-    want = expected.read_text(encoding="utf-8").replace("@INPUT@", str(source.resolve()))
+    # Rhubarb's soundFile is the recording (--audio), not the timeline (issue 31)
+    audio = Path(__file__).resolve().parents[1] / "samples" / "hello.wav"
+    assert main(["cues", str(source), "-o", str(out), "--format", fmt, "--quiet", "--audio", str(audio)]) == 0
+    want = expected.read_text(encoding="utf-8").replace("@INPUT@", str(audio))
     assert out.read_text(encoding="utf-8") == want
 
 

@@ -32,7 +32,7 @@ PathLike = Union[str, "os.PathLike[str]"]
 FIELDS = {
     "input": "timeline file in any format a reader takes (audio too, where a reader takes it, with text)",
     "output": "file name under OUTDIR (.mp4, .mkv, .webm, .mov, .webp, .gif); subfolders allowed",
-    "bank": "viseme bank folder (default: the shipped toon)",
+    "bank": "viseme bank folder, or a shipped subject's name (toon, grid-s1; default: the toon)",
     "text": "transcript for audio input: the text itself, or a file holding it",
     "audio": "speech to mux into the video",
     "fps": f"frames per second (default: {DEFAULT_FPS:g})",
@@ -215,7 +215,7 @@ def read_manifest(path: PathLike, outdir: Optional[PathLike] = None) -> List[Cli
     >>> [(j.line, j.input.name, j.output, j.fps) for j in read_manifest(os.path.join(d, "clips.csv"))]
     [(2, 'a.tsv', 'one.mp4', 30.0)]
     """
-    from .._data import default_bank_dir
+    from .._data import default_bank_dir, shipped_banks
     from ..bank import Bank
     from ..encode import format_for
     from ..phonemes import DEFAULT_MAP, MAPS, load_map
@@ -300,6 +300,8 @@ def read_manifest(path: PathLike, outdir: Optional[PathLike] = None) -> List[Cli
 
         bank_field = field("bank")
         bank_dir = local(bank_field) if bank_field else default_bank_dir()
+        if bank_field and not bank_dir.exists() and bank_field in shipped_banks():  # a shipped subject's name
+            bank_dir = shipped_banks()[bank_field]
         if bank_dir not in bank_ok:
             try:
                 Bank.load(bank_dir)

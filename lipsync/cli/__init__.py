@@ -12,7 +12,7 @@ import sys
 import threading
 from typing import Callable, List, Optional
 
-from ..errors import InputError
+from ..errors import InputError, TranscriptMismatch
 
 EXIT_OK, EXIT_FAILURE, EXIT_BAD_INPUT, EXIT_INTERRUPTED = 0, 1, 2, 130
 #: After SIGTERM: 128 + 15, the shell's convention for "ended by signal 15".
@@ -109,9 +109,15 @@ def main(argv: Optional[List[str]] = None) -> int:
     terminated: List[int] = []
     saved_term = _on_sigterm(terminated)
     try:
+        if getattr(args, "allow_mismatch", True) is False:
+            warnings.filterwarnings("error", category=TranscriptMismatch)
         return int(func(args) or 0)
     except InputError as exc:
         print(f"lipsync: error: {exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except TranscriptMismatch as exc:
+        print(f"lipsync: error: {exc}; if it is the right transcript, --allow-mismatch goes on",
+              file=sys.stderr)
         return EXIT_BAD_INPUT
     except KeyboardInterrupt:
         if terminated:
@@ -126,6 +132,8 @@ def main(argv: Optional[List[str]] = None) -> int:
         return EXIT_FAILURE
     finally:
         warnings.formatwarning = saved
+        if getattr(args, "allow_mismatch", True) is False:
+            warnings.filters[:] = [f for f in warnings.filters if f[2] is not TranscriptMismatch]
         if saved_term is not None:
             signal.signal(signal.SIGTERM, saved_term)
 

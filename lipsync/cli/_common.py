@@ -25,9 +25,36 @@ DEFAULT_MOHO_FPS = 24.0
 
 
 def add_bank_option(parser: argparse.ArgumentParser) -> None:
-    """``--bank DIR``: the subject (default: the shipped toon)."""
-    parser.add_argument("--bank", default=None, metavar="DIR",
-                        help="viseme bank folder (default: the shipped toon)")
+    """``--bank DIR_OR_NAME``: the subject (default: the shipped toon)."""
+    parser.add_argument("--bank", default=None, metavar="DIR_OR_NAME",
+                        help="viseme bank folder, or a shipped subject's name: toon (the default), grid-s1")
+
+
+def add_mismatch_option(parser) -> None:
+    """``--allow-mismatch``: go on with a transcript that does not fit the speech at all.
+
+    Without it such a transcript (the aligner's confidence below
+    ``lipsync.speech.align.NO_FIT_CONFIDENCE``) stops the command with exit 2: it is almost
+    always the wrong file, and a video of recognised words would hide that.
+    """
+    parser.add_argument("--allow-mismatch", action="store_true",
+                        help="go on when the --text transcript does not fit the speech at all (default: exit 2)")
+
+
+def add_shapes_option(parser) -> None:
+    """``--shapes all|basic``: keep to Rhubarb's basic shapes A-F (and X)."""
+    parser.add_argument("--shapes", choices=("all", "basic"), default="all",
+                        help="mouth shapes used: all of the map's (default), or basic: Rhubarb's A-F and X, "
+                             "G shown as B and H as C (Rhubarb's fallbacks), for a character drawn without G and H")
+
+
+def shaped_timeline(args, *, rest=None, viseme_names=None):
+    """``load_viseme_timeline`` then ``--shapes``: (viseme timeline, map) in the bank's names."""
+    from ..writers.rhubarb import basic_shapes_track
+
+    timeline, pmap = load_viseme_timeline(args, rest=rest, viseme_names=viseme_names)
+    base = load_map(getattr(args, "map", None) or DEFAULT_MAP)
+    return basic_shapes_track(timeline, pmap, base, args.shapes), pmap
 
 
 def add_store_option(parser: argparse.ArgumentParser) -> None:
@@ -77,6 +104,7 @@ def add_timeline_options(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--text", default=None, metavar="TEXT_OR_FILE",
                        help="for audio input: its transcript, or a text file holding it "
                             "(default: the words are recognised)")
+    add_mismatch_option(group)
     group.add_argument("--map", default=DEFAULT_MAP, metavar="NAME_OR_FILE",
                        help=f"phoneme-to-viseme map: a shipped name ({', '.join(MAPS.names())}) "
                             f"or a YAML file (default: {DEFAULT_MAP})")

@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import argparse
 
+from ._common import add_mismatch_option
+
 #: Options of the photo side that mean nothing for a video, with their defaults.
 _PHOTO_ONLY = {"template": "toon", "names": [], "face_box": None, "layout": "auto", "lines": "auto", "rest": None}
 
@@ -22,6 +24,7 @@ def add_video_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--text", default=None, metavar="TEXT_OR_FILE",
                    help="transcript of the video (one video only); else NAME.txt or NAME.lab beside each "
                         "video, else the words are recognised")
+    add_mismatch_option(g)
     g.add_argument("--map", default=DEFAULT_MAP, metavar="NAME_OR_FILE",
                    help=f"phoneme-to-viseme map whose visemes the bank gets: {', '.join(MAPS.names())} or a "
                         f"YAML file (default: {DEFAULT_MAP})")

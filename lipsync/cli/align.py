@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import argparse
+
+from ._common import add_mismatch_option
 import sys
 
 
@@ -16,6 +18,7 @@ def add_parser(sub) -> None:
     p.add_argument("audio", metavar="AUDIO", help="speech audio: any file ffmpeg reads (wav, flac, mp3, m4a, ogg, ...)")
     p.add_argument("--text", default=None, metavar="TEXT_OR_FILE",
                    help="the transcript, or a UTF-8 text file holding it (default: recognise the words)")
+    add_mismatch_option(p)
     p.add_argument("-o", "--output", required=True, metavar="OUT",
                    help="output file (.TextGrid: Praat long form with tiers words and phones; .json)")
     p.add_argument("--format", choices=ALIGNMENT_FORMATS.names(), default=None,

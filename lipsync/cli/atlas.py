@@ -1,4 +1,7 @@
-"""``lipsync atlas BANK -o ATLAS.png [TIMELINE ...]``: a sprite atlas for game engines.
+"""``lipsync atlas [BANK] -o ATLAS.png [TIMELINE ...]``: a sprite atlas for game engines.
+
+BANK is a folder or a shipped subject's name (default: the toon; ``--bank`` says the same
+when the first positional should be a timeline).
 
 Every viseme and ``--inbetweens`` in-betweens of each transition, rendered by the renderer
 ``render`` uses, in one RGBA texture, with ``ATLAS.json`` saying where each cell is and
@@ -27,7 +30,10 @@ def add_parser(sub) -> None:
                                    "texture ATLAS.png, described by ATLAS.json (cell rectangles, pair, alpha). "
                                    "`lipsync cues INPUT --format atlas --atlas ATLAS.json --fps F` gives the "
                                    "cell of every frame.")
-    p.add_argument("bank", metavar="BANK", help="bank folder")
+    p.add_argument("bank", metavar="BANK", nargs="?", default=None,
+                   help="bank folder or shipped subject (toon, grid-s1); default: the toon")
+    p.add_argument("--bank", dest="bank_option", default=None, metavar="DIR_OR_NAME",
+                   help="the bank, as an option (then every positional is a timeline)")
     p.add_argument("timelines", metavar="TIMELINE", nargs="*",
                    help="timelines whose transitions the atlas holds (any format `lipsync render` reads)")
     p.add_argument("-o", "--output", required=True, metavar="ATLAS.png",
@@ -57,6 +63,23 @@ def add_parser(sub) -> None:
     p.set_defaults(func=run, extra_positionals="timelines")
 
 
+def _bank_and_timelines(args: argparse.Namespace) -> None:
+    """Settle ``args.bank``: the first positional is the bank unless it is a timeline file
+    (``lipsync atlas -o A.png speech.TextGrid`` uses the toon), then ``--bank``, then the toon."""
+    import os
+
+    from .._data import DEFAULT_BANK_NAME
+    from ..errors import InputError
+
+    first = args.bank
+    if first is not None and os.path.isfile(first) and os.path.basename(first) != "bank.yaml":
+        args.timelines.insert(0, first)
+        first = None
+    if first is not None and args.bank_option is not None:
+        raise InputError(f"two banks given: {first!r} and --bank {args.bank_option!r}")
+    args.bank = first or args.bank_option or DEFAULT_BANK_NAME
+
+
 def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
@@ -69,6 +92,7 @@ def run(args: argparse.Namespace) -> int:
     from ._common import check_png, load_viseme_timeline
 
     check_png(args.output)
+    _bank_and_timelines(args)
     if Path(args.output).is_dir():
         raise InputError("is a folder; give a file name for the atlas", path=args.output)
     mode = args.pairs or ("used" if args.timelines else "all")

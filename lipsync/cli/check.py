@@ -11,7 +11,7 @@ from ._common import add_store_option
 
 def add_parser(sub) -> None:
     c = sub.add_parser("check", help="validate a bank and summarise it, computing nothing")
-    c.add_argument("bank", help="bank folder (with bank.yaml)")
+    c.add_argument("bank", help="bank folder (with bank.yaml), or a shipped subject's name (toon, grid-s1)")
     add_store_option(c)
     c.set_defaults(func=run)
 

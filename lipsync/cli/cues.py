@@ -21,7 +21,7 @@ from typing import Dict
 
 from ..frames import DEFAULT_FPS as DEFAULT_RENDER_FPS
 from ..writers import DEFAULT_FPS, DEFAULT_TIER, WRITERS
-from ._common import add_bank_option, add_quiet_option, add_timeline_options, load_viseme_timeline
+from ._common import add_bank_option, add_quiet_option, add_shapes_option, add_timeline_options, shaped_timeline
 
 
 def add_parser(subparsers) -> argparse.ArgumentParser:
@@ -44,7 +44,11 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                         help="for --format atlas: the atlas (from `lipsync atlas`) whose cells the frames name")
     parser.add_argument("--tier-name", default=DEFAULT_TIER, metavar="NAME",
                         help=f"TextGrid tier name (default: {DEFAULT_TIER})")
+    parser.add_argument("--audio", default=None, metavar="FILE",
+                        help="the recording the cues go with: Rhubarb JSON/XML name it as soundFile "
+                             "(default: INPUT when it is audio, else none)")
     add_bank_option(parser)
+    add_shapes_option(parser)
     add_quiet_option(parser)
     add_timeline_options(parser)
     parser.set_defaults(func=run)
@@ -70,11 +74,12 @@ def run(args: argparse.Namespace) -> int:
         return _atlas_frames(args, fps)
     if args.atlas is not None:
         raise InputError("--atlas is for --format atlas only")
+    sound = _sound_file(args)  # a missing --audio fails before any reading
     base = load_map(args.map or DEFAULT_MAP)  # the map's own names, whatever the bank calls them
     if args.bank is not None:
         timeline, pmap, to_map, rest = _bank_track(args, base)
     else:
-        timeline, pmap = load_viseme_timeline(args)
+        timeline, pmap = shaped_timeline(args)
         to_map, rest = {}, pmap.silence
     plan = plan_segments(timeline, rest=rest, closures=pmap.closures)
     # Back to the map's own names (A-H, X for Rhubarb) so every format names shapes alike.
@@ -85,11 +90,27 @@ def run(args: argparse.Namespace) -> int:
         # Preston Blair names where the map has them (Papagayo's and Moho's switch names).
         names = {v: aliases[0] for v, aliases in base.aliases.items() if aliases}
     write_cues(cues, args.output, name, rest=rest, fps=fps, tier=args.tier_name,
-               sound_file=os.path.abspath(args.timeline), names=names,
+               sound_file=sound, names=names,
                closures=[to_map.get(c, c) for c in pmap.closures], duration=timeline.duration)
     if not args.quiet:
         print(f"lipsync: wrote {len(cues)} cues ({WRITERS.get(name).name}) to {args.output}", file=sys.stderr)
     return 0
+
+
+def _sound_file(args: argparse.Namespace) -> str:
+    """Rhubarb's ``soundFile``: the recording (``--audio``, or INPUT when it is audio), as an
+    absolute path; empty when there is none (a timeline is not a sound file)."""
+    from ..readers.audio import is_audio_input
+
+    if args.audio is not None:
+        if not os.path.isfile(args.audio):
+            from ..errors import InputError
+
+            raise InputError("no such audio file", path=args.audio)
+        return os.path.abspath(args.audio)
+    if is_audio_input(args.timeline, args.timeline_format):
+        return os.path.abspath(args.timeline)
+    return ""
 
 
 def _atlas_frames(args: argparse.Namespace, fps: float) -> int:
@@ -113,7 +134,7 @@ def _atlas_frames(args: argparse.Namespace, fps: float) -> int:
             raise InputError(f"the bank's visemes ({', '.join(bank.names)}; rest {bank.rest}) are not the "
                              f"atlas' ({', '.join(atlas.visemes)}; rest {atlas.rest})", path=args.atlas)
     # the atlas names the bank's visemes and rest: the track is matched to them as to a bank
-    timeline, pmap = load_viseme_timeline(args, rest=atlas.rest, viseme_names=atlas.visemes)
+    timeline, pmap = shaped_timeline(args, rest=atlas.rest, viseme_names=atlas.visemes)
     plan = plan_segments(timeline, rest=atlas.rest, closures=pmap.closures)
     # the timing render would use: --timing, else the bank's (bank.yaml), else the default
     timing = resolve_timing(args.timing, bank)
@@ -134,6 +155,6 @@ def _bank_track(args: argparse.Namespace, base):
     from ..phonemes import resolve_visemes
 
     bank = Bank.load(args.bank)
-    timeline, pmap = load_viseme_timeline(args, rest=bank.rest, viseme_names=bank.names)
+    timeline, pmap = shaped_timeline(args, rest=bank.rest, viseme_names=bank.names)
     names, _ = resolve_visemes(base, bank.names)
     return timeline, pmap, {b: m for m, b in names.items()}, bank.rest

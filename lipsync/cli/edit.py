@@ -9,7 +9,7 @@ from ._common import add_store_option
 
 def add_parser(sub) -> None:
     p = sub.add_parser("edit", help="edit a bank's control lines in the browser (local server)")
-    p.add_argument("bank", help="bank folder (with bank.yaml; make one with lipsync init)")
+    p.add_argument("bank", help="bank folder (with bank.yaml; make one with lipsync init), or a shipped subject's name (toon, grid-s1)")
     p.add_argument("--port", type=int, default=0, metavar="N", help="port on 127.0.0.1 (default: a free one)")
     p.add_argument("--open", action="store_true", help="open the page in the default browser")
     add_store_option(p)

@@ -18,7 +18,7 @@ def add_parser(sub) -> None:
     m = sub.add_parser("morph", help="render one in-between frame, or a strip of them",
                        description="Morph between two visemes of a bank: one frame with --alpha, or with "
                                    "--frames N a strip of forward warps, blends and backward warps.")
-    m.add_argument("bank", help="bank folder")
+    m.add_argument("bank", help="bank folder, or a shipped subject's name (toon, grid-s1)")
     m.add_argument("from_viseme", metavar="FROM")
     m.add_argument("to_viseme", metavar="TO")
     g = m.add_mutually_exclusive_group(required=True)

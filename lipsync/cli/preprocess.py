@@ -13,7 +13,7 @@ def add_parser(sub) -> None:
     p = sub.add_parser("preprocess", help="compute and cache the flows between every pair of visemes",
                        description="Compute the Beier-Neely flow of every viseme pair that the flow "
                                    "store lacks (in parallel), then print a summary.")
-    p.add_argument("bank", help="bank folder (with bank.yaml)")
+    p.add_argument("bank", help="bank folder (with bank.yaml), or a shipped subject's name (toon, grid-s1)")
     add_jobs_option(p, "computing flows")
     add_store_option(p)
     p.add_argument("--prune", action="store_true",

@@ -12,7 +12,7 @@ SHEET_TILE = 320
 
 def add_parser(sub) -> None:
     p = sub.add_parser("preview", help="draw every viseme with its control lines (check line placement)")
-    p.add_argument("bank", help="bank folder")
+    p.add_argument("bank", help="bank folder, or a shipped subject's name (toon, grid-s1)")
     p.add_argument("-o", "--output", required=True, metavar="SHEET.png")
     p.add_argument("--normalised", action="store_true", help="show the images and lines after symmetric "
                                                              "normalisation")

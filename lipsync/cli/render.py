@@ -8,7 +8,8 @@ import sys
 from ..clip import DEFAULT_CRF, DEFAULT_FPS, DEFAULT_PRESET
 from ..encode import ENCODERS
 from ..render import METHODS
-from ._common import add_bank_option, add_jobs_option, add_quiet_option, add_store_option, add_timeline_options
+from ._common import (add_bank_option, add_jobs_option, add_quiet_option, add_shapes_option, add_store_option,
+                      add_timeline_options)
 
 
 def add_parser(sub) -> None:
@@ -45,6 +46,7 @@ def add_parser(sub) -> None:
     p.add_argument("--crf", type=int, default=DEFAULT_CRF, help=f"H.264 quality, lower is better (default: {DEFAULT_CRF})")
     p.add_argument("--preset", default=DEFAULT_PRESET,
                    help=f"x264 speed preset: x264's (ultrafast ... veryslow) or talking-head (default: {DEFAULT_PRESET})")
+    add_shapes_option(p)
     add_store_option(p)
     add_jobs_option(p)
     add_quiet_option(p)
@@ -67,7 +69,15 @@ def run(args: argparse.Namespace) -> int:
     bank = Bank.load(args.bank or default_bank_dir())
     composite = False if args.mouth_only else \
         composite_from_options(bank.composite, over=args.over, at=args.at, scale=args.scale)
-    report = render_clip(args.timeline, args.output, bank=bank, audio=args.audio, fps=args.fps,
+    timeline, audio = args.timeline, args.audio
+    if args.shapes != "all":  # the track read and mapped here, its G and H replaced
+        from ..readers.audio import is_audio_input
+        from ._common import shaped_timeline
+
+        if audio is None and is_audio_input(args.timeline, args.timeline_format):
+            audio = args.timeline
+        timeline, _ = shaped_timeline(args, rest=bank.rest, viseme_names=bank.names)
+    report = render_clip(timeline, args.output, bank=bank, audio=audio, fps=args.fps,
                          map=args.map, method=args.method, timing=args.timing, format=args.format,
                          crf=args.crf, preset=args.preset, store=args.store, jobs=args.jobs,
                          quiet=args.quiet, timeline_options=args, background=background, composite=composite)

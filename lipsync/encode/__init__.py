@@ -3,18 +3,17 @@
 One module per output kind, each registering its writer(s) in :data:`ENCODERS` (name:
 extensions; alpha: whether RGBA frames keep their transparency):
 
-=============  ==================  =====  ======================================================
-module         name: extensions    alpha  output
-=============  ==================  =====  ======================================================
-:mod:`.mp4`    mp4: .mp4 .m4v .mkv  no    H.264, AAC audio (the default; H.264 in .mov with
-                                          ``format="mp4"``)
-:mod:`.png`    png: a folder        yes   ``frame_000000.png`` ... (no audio)
-:mod:`.webm`   webm: .webm          yes   VP9 (``yuva420p``), Opus audio
-:mod:`.mov`    mov: .mov            yes   ProRes 4444 (``yuva444p10le``), PCM audio
-:mod:`.mov`    qtrle                yes   QuickTime Animation (lossless RLE), PCM audio
-:mod:`.webp`   webp: .webp          yes   animated WebP, looping (no audio)
-:mod:`.gif`    gif: .gif            1-bit animated GIF, one palette, looping (no audio)
-=============  ==================  =====  ======================================================
+============  ===================  =====  ===================================================================
+module        name: extensions     alpha  output
+============  ===================  =====  ===================================================================
+:mod:`.mp4`   mp4: .mp4 .m4v .mkv  no     H.264, AAC audio (the default; H.264 in .mov with ``format="mp4"``)
+:mod:`.png`   png: a folder        yes    ``frame_000000.png`` ... (no audio)
+:mod:`.webm`  webm: .webm          yes    VP9 (``yuva420p``), Opus audio
+:mod:`.mov`   mov: .mov            yes    ProRes 4444 (``yuva444p12le``), PCM audio
+:mod:`.mov`   qtrle                yes    QuickTime Animation (lossless RLE), PCM audio
+:mod:`.webp`  webp: .webp          yes    animated WebP, looping (no audio)
+:mod:`.gif`   gif: .gif            1-bit  animated GIF, one palette, looping (no audio)
+============  ===================  =====  ===================================================================
 
 :mod:`.base` holds the writer protocol and the registry, :mod:`.ffmpeg` the plumbing every
 video writer shares (the bundled ffmpeg as a subprocess, audio muxing, error reporting) and

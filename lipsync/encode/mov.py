@@ -1,9 +1,11 @@
 """QuickTime MOV for editors: ProRes 4444 with alpha (``mov``), or QuickTime Animation (``qtrle``).
 
-``mov``: Apple ProRes 4444 (``prores_ks``, profile 4444) in ``yuva444p10le`` for RGBA frames
--- full-resolution chroma and a 16-bit alpha plane, what After Effects, Premiere, Final Cut
-and DaVinci Resolve take as a transparent intermediate -- or ``yuv444p10le`` for opaque
-frames; BT.709, tagged. ``qtrle``: QuickTime Animation, lossless run-length RGB(A)
+``mov``: Apple ProRes 4444 (``prores_ks``, profile 4444), stored as ``yuva444p12le`` for
+RGBA frames -- full-resolution chroma and a 16-bit alpha plane, what After Effects,
+Premiere, Final Cut and DaVinci Resolve take as a transparent intermediate -- or
+``yuv444p12le`` for opaque frames; BT.709, tagged. (The frames reach ffmpeg as 10-bit
+``yuva444p10le``/``yuv444p10le``; ProRes 4444 itself is 12-bit, which is what a player
+or ``ffprobe`` reports.) ``qtrle``: QuickTime Animation, lossless run-length RGB(A)
 (``argb``): larger, but exact, and older tools read it.
 
 Audio is 16-bit PCM (lossless, what editors expect in a MOV), cut and padded to the video

@@ -57,13 +57,14 @@ from typing import List, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
+from ..errors import TranscriptMismatch
 from ..timeline import PHONEME, Segment, Timeline
 from .audio import SAMPLE_RATE, load_audio
 from .lexicon import _add_stress, lookup_missing, normalise_transcript, pronounce, pronunciations
 
 PathLike = Union[str, "os.PathLike[str]"]
 
-__all__ = ["Alignment", "align", "align_samples", "AlignmentWarning", "MissingWordsWarning",
+__all__ = ["Alignment", "align", "align_samples", "AlignmentWarning", "TranscriptMismatchWarning", "MissingWordsWarning",
            "read_transcript", "VERSION"]
 
 #: Bumped when alignment results change (part of any cache key).
@@ -99,6 +100,15 @@ BOUNDARY_OFFSET_S = 0.0
 
 #: Below this confidence a transcript is reported as not fitting the audio.
 LOW_CONFIDENCE = 0.5
+#: Below this confidence, with words of it not found, the transcript does not fit at all
+#: (TranscriptMismatchWarning; an error on the command line without --allow-mismatch). A
+#: transcript all of whose words were found but that covers little of the speech (a
+#: partial one) stays an AlignmentWarning. GRID s1, 40 sentences: their own transcripts
+#: score 0.60 and up (none refused); another sentence's transcript (one each) is refused 31
+#: times of 40 (median confidence 0.00, highest 0.41); one word added 4, the letter left
+#: out 1, the first two words alone 0 (those stay warnings: a transcript that is nearly
+#: right, or right but partial, is still worth aligning).
+NO_FIT_CONFIDENCE = 0.25
 #: Below this acoustic fit (:func:`_acoustic_fit`) a transcript whose words all aligned is
 #: taken as not what was said, and the relaxed search looks for the words that are there.
 #: A fit of 0.2 is a score 6 units a frame below :data:`FIT_LLR_CENTRE` (17 below the free
@@ -134,6 +144,12 @@ RECOGNISER_SETTINGS = dict(fwdflat=False, bestpath=True, beam=1e-40, pbeam=1e-40
 
 class AlignmentWarning(UserWarning):
     """The transcript does not fit the audio well (the message gives a confidence figure)."""
+
+
+class TranscriptMismatchWarning(AlignmentWarning, TranscriptMismatch):
+    """The transcript does not fit the audio at all (confidence below :data:`NO_FIT_CONFIDENCE`):
+    another recording's script, or the wrong file. ``lipsync`` commands stop on it (exit 2)
+    unless ``--allow-mismatch`` is given."""
 
 
 class MissingWordsWarning(UserWarning):
@@ -833,15 +849,27 @@ def read_transcript(text: Optional[str]) -> Optional[str]:
         return None
     if len(text) < 4096 and "\n" not in text and os.path.isfile(text):
         from ..errors import InputError
+        from .text import not_a_transcript
 
         try:
             with open(text, "rb") as f:
                 raw = f.read()
-            text = raw.decode("utf-8-sig")
+            path, text = text, raw.decode("utf-8-sig")
         except UnicodeDecodeError:
-            raise InputError("transcript is not UTF-8 text", path=text) from None
+            raise InputError("transcript is not UTF-8 text (binary data?)", path=text) from None
         except OSError as exc:
             raise InputError(f"cannot read transcript: {exc.strerror or exc}", path=text) from None
+        what = not_a_transcript(text)
+        if what:
+            raise InputError(f"given as a transcript, but this looks like {what}", path=path)
+    elif len(text) < 4096:
+        from .text import looks_like_path
+
+        if looks_like_path(text) and not os.path.exists(text):
+            from ..errors import InputError
+
+            raise InputError("no such transcript file (a --text value that names a file must exist; "
+                             "words with spaces are read as the transcript itself)", path=text)
     return text if text.strip() else None
 
 
@@ -960,7 +988,12 @@ def align_samples(pcm: np.ndarray, text: Optional[str] = None, *, quiet: bool = 
                 what = "fits the audio poorly; the alignment is a best effort"
             warnings.warn(f"{path or 'audio'}: the transcript {what} (confidence {confidence:.2f}: the "
                           "smallest of the share of its words found, the share of the speech they cover "
-                          "and how well they match the sounds)", AlignmentWarning, stacklevel=2)
+                          "and how well they match the sounds)",
+                          # all its words found but little of the speech covered: a partial
+                          # transcript, worth aligning; words not found as well: the wrong one
+                          TranscriptMismatchWarning if confidence < NO_FIT_CONFIDENCE and (failed or skipped)
+                          else AlignmentWarning,
+                          stacklevel=2)
     return _to_alignment(timings, duration, path, transcript if has_text else tuple(w for w, *_ in timings),
                          recognised=not has_text or failed > 0, confidence=confidence, missing=missing,
                          skipped=tuple(skipped) if has_text else ())

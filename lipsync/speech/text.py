@@ -15,9 +15,9 @@ from __future__ import annotations
 
 import re
 import unicodedata
-from typing import List
+from typing import List, Optional
 
-__all__ = ["normalise_transcript", "number_words"]
+__all__ = ["normalise_transcript", "number_words", "not_a_transcript", "looks_like_path"]
 
 # Typographic quotes and dashes people paste from word processors, folded to ASCII first so
 # the rules below see one apostrophe and one hyphen.
@@ -142,3 +142,78 @@ def normalise_transcript(text: str) -> List[str]:
             if w:
                 words.append(_ABBREVIATIONS.get(w, w))
     return words
+
+
+# --- what a --text value is -------------------------------------------------------------------
+
+# Files people pass as a transcript by mistake, each recognised by how it starts or by every
+# line's shape, with what to say. Their numbers and markup would otherwise be read as words
+# (an Audacity label track of samples/hello.lab's sentence read as 539 "words").
+_TIMED_LINE = re.compile(r"^\s*[-+]?\d+(?:\.\d+)?(?:\t|\s+[-+]?\d+(?:\.\d+)?(?:\s|$))")
+_NOT_TRANSCRIPTS = (
+    # (test on the text's start, stripped, case-folded; what the file looks like)
+    (lambda t: t.startswith('file type = "ootextfile"') or t.startswith("file type = \"ootextfile\""),
+     "a Praat TextGrid (a timeline: give it as the input, not as --text)"),
+    (lambda t: t.startswith("lipsync version"), "a Papagayo project (.pgo; a timeline, not a transcript)"),
+    (lambda t: t.startswith("mohoswitch"), "Moho switch data (.dat; a timeline, not a transcript)"),
+    (lambda t: t.startswith("webvtt") , "WebVTT subtitles (give the words alone)"),
+    (lambda t: t.startswith("<?xml") or t.startswith("<"), "XML or HTML markup (give the words alone)"),
+    (lambda t: t.startswith("{") or t.startswith("["), "JSON (a timeline or word timings: give it as the "
+                                                       "input, or the words alone as --text)"),
+)
+
+
+def not_a_transcript(text: str) -> Optional[str]:
+    r"""What ``text`` (a file's contents) looks like when it is not a transcript, else None.
+
+    Label tracks, TextGrids, JSON, XML, Papagayo and Moho files, subtitles and binary data
+    are refused by ``--text`` rather than read as words.
+
+    Examples
+    --------
+    >>> not_a_transcript("Hello, I am a talking head.") is None
+    True
+    >>> not_a_transcript("0.000000\t0.300000\thello\n0.300000\t0.600000\tthere\n")
+    'an Audacity label track or other timed lines (start and end times before each label: a timeline, not a transcript)'
+    >>> not_a_transcript('{"words": []}')
+    'JSON (a timeline or word timings: give it as the input, or the words alone as --text)'
+    """
+    if "\0" in text:
+        return "binary data, not text"
+    head = text.lstrip("\ufeff \t\r\n")[:64].casefold()
+    for test, what in _NOT_TRANSCRIPTS:
+        if test(head):
+            return what
+    lines = [line for line in text.splitlines() if line.strip()]
+    if lines and all(_TIMED_LINE.match(line) for line in lines) and (len(lines) > 1 or "\t" in lines[0]):
+        return ("an Audacity label track or other timed lines (start and end times before each label: "
+                "a timeline, not a transcript)")
+    if any("-->" in line for line in lines[:4]) and any(_TIMED_LINE.match(line) for line in lines[:4]):
+        return "SRT subtitles (give the words alone)"
+    return None
+
+
+# A --text value that names a file rather than saying words: one token with a folder part or
+# a file extension people keep transcripts (or mistake for them) in.
+_PATH_PREFIXES = ("/", "./", "../", "~/", ".\\", "..\\")
+_TEXT_EXTENSIONS = {"txt", "lab", "text", "textgrid", "json", "srt", "vtt", "csv", "tsv", "md", "xml",
+                    "pgo", "dat", "phn", "rtf", "doc", "docx", "odt", "wav", "mp3", "mp4"}
+_EXTENSION = re.compile(r"\.([A-Za-z0-9]{1,9})$")
+
+
+def looks_like_path(value: str) -> bool:
+    """Whether a ``--text`` value is meant as a file name (so a missing one is an error).
+
+    Examples
+    --------
+    >>> looks_like_path("media/missing.txt"), looks_like_path("hello.lab"), looks_like_path("./script")
+    (True, True, True)
+    >>> looks_like_path("Hello there."), looks_like_path("and/or"), looks_like_path("e.g.")
+    (False, False, False)
+    """
+    if not value or any(c.isspace() for c in value):
+        return False
+    if value.startswith(_PATH_PREFIXES):
+        return True
+    ext = _EXTENSION.search(value)
+    return bool(ext) and (ext.group(1).lower() in _TEXT_EXTENSIONS or "/" in value or "\\" in value)

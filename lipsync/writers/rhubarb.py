@@ -23,6 +23,47 @@ from .base import WRITERS, Cue, CueOptions, Writer
 
 SHAPES = ("A", "B", "C", "D", "E", "F", "G", "H", "X")
 
+#: ``--shapes``: which of Rhubarb's shapes a track may use, and what the others become.
+#: Rhubarb's own fallbacks (its ``getBasicShape``: G -> B, H -> C), kept for those who draw
+#: only the basic shapes A-F (and X, the idle mouth; Rhubarb's ``--extendedShapes X``).
+SHAPE_SETS = {
+    "all": {},                       # A-H and X, as drawn for the default map
+    "basic": {"G": "B", "H": "C"},   # F/V's teeth on lip -> clenched teeth; L's tongue -> open
+}
+
+
+def basic_shapes_track(timeline, pmap, base, shapes: str):
+    """A viseme timeline with only the shapes of ``shapes`` (a :data:`SHAPE_SETS` name).
+
+    ``timeline`` and ``pmap`` are in the bank's viseme names (as
+    :func:`lipsync.cli._common.load_viseme_timeline` returns them), ``base`` the map as
+    loaded, in its own names (Rhubarb's letters): the fallbacks are found in the bank's names
+    through the phones both maps send to each viseme.
+
+    Examples
+    --------
+    >>> from lipsync.phonemes import load_map
+    >>> from lipsync.timeline import Segment, Timeline
+    >>> m = load_map("rhubarb")
+    >>> tl = Timeline((Segment(0, 1, "G"), Segment(1, 2, "H"), Segment(2, 3, "D")), kind="viseme")
+    >>> basic_shapes_track(tl, m, m, "basic").labels()
+    ['B', 'C', 'D']
+    """
+    fallbacks = SHAPE_SETS.get(shapes)
+    if fallbacks is None:
+        raise InputError(f"--shapes {shapes!r}: one of {', '.join(SHAPE_SETS)}")
+    if not fallbacks:
+        return timeline
+    if not set(SHAPES) <= set(base.visemes()):
+        raise InputError(f"--shapes {shapes} keeps to Rhubarb's shapes A-F: the map {base.name!r} has other "
+                         f"visemes ({', '.join(base.visemes())}); use the default map (english-to-rhubarb)")
+    rename = {base.silence: pmap.silence, base.fallback: pmap.fallback}
+    for phone in base.map:
+        rename.update(zip(base.targets(phone), pmap.targets(phone)))
+    table = {rename.get(a, a): rename.get(b, b) for a, b in fallbacks.items()}
+    segments = tuple(type(seg)(seg.start, seg.end, table.get(seg.label, seg.label)) for seg in timeline)
+    return timeline.replace(segments=segments)
+
 # Milliseconds: the finest step a 1000 fps clock shows, and finer than any frame rate.
 _DECIMALS = 3
 
