@@ -49,6 +49,7 @@ FIXTURES = {
     "scene.pgo": "tests/data/timelines/papagayo_two_voices.pgo",
     "face.jpg": "tests/data/faces/astronaut.jpg",
     "speaker.mp4": "tests/data/grid-s1/bbwm5s.mpg",
+    "french.TextGrid": "tests/data/phonetics/french_mfa_ipa.TextGrid",
 }
 #: Made from samples/hello.wav by the bundled ffmpeg (the pages show other containers).
 CONVERTED = ("speech.mp3", "speech.m4a", "speech.flac")
