@@ -229,14 +229,24 @@ def _recogniser():
     return Decoder(loglevel="FATAL", **RECOGNISER_SETTINGS)
 
 
+#: Pronunciations (en-us acoustic units) of the words of other languages, by their decoder
+#: names (:mod:`lipsync.speech.languages` makes them: ``ipa_`` and a digest of the word and
+#: its units, so one name never has two pronunciations in a decoder's dictionary).
+_CUSTOM: dict = {}
+
+
 def _ensure_words(decoder, words: Sequence[str]) -> None:
-    for w in lookup_missing(words):
+    for w in lookup_missing([w for w in words if w not in _CUSTOM]):
         if decoder.lookup_word(w) is None:
             decoder.add_word(w, " ".join(p.rstrip("012") for p in pronounce(w)), True)
 
 
 def _arcs(decoder, word: str) -> List[str]:
     """The decoder's dictionary names of ``word``'s pronunciations (added when missing)."""
+    if word in _CUSTOM:
+        if decoder.lookup_word(word) is None:
+            decoder.add_word(word, " ".join(_CUSTOM[word]), True)
+        return [word]
     names = []
     for name, phones in pronunciations(word):
         if decoder.lookup_word(name) is None:
@@ -645,14 +655,33 @@ def _recognise(pcm: np.ndarray) -> Tuple[List[str], List[_WordTiming]]:
 
 def _even_phones(word: str, start: int, end: int) -> _WordTiming:
     word = _VARIANT.sub("", word).lower()
-    phones = [p.rstrip("012") for p in pronounce(word)] or ["AH"]
+    phones = list(_CUSTOM[word]) if word in _CUSTOM else [p.rstrip("012") for p in pronounce(word)] or ["AH"]
     edges = np.linspace(start, end, len(phones) + 1).round().astype(int)
     return word, start, end, [(p, int(a), int(b)) for p, a, b in zip(phones, edges[:-1], edges[1:])]
 
 
+def _loop_phones(pcm: np.ndarray) -> Tuple[List[str], List[_WordTiming]]:
+    """Phones the free phone loop hears in ``pcm`` (any language), each as a nameless word.
+
+    pocketsphinx's en-us context-independent phones, any one after any other (the fit
+    check's search, :func:`_phone_loop_scores`): what Rhubarb Lip Sync's "phonetic"
+    recogniser does for speech in languages it has no model for.
+    """
+    d = _aligner()
+    try:
+        d.activate_search(_LOOP)
+        _decode(d, pcm)
+        if d.hyp() is None:
+            return [], []
+        segs = [(s.word, s.start_frame, s.end_frame + 1) for s in d.seg()]
+    except RuntimeError:
+        return [], []
+    return [], [("", a, b, [(p, a, b)]) for p, a, b in segs if p not in _NON_SPEECH_PHONES and b > a]
+
+
 def _chunk_job(job):
-    """One chunk's work, ("recognise", pcm): runs in a worker process."""
-    return _recognise(job[1])
+    """One chunk's work, ("recognise" or "loop", pcm): runs in a worker process."""
+    return _loop_phones(job[1]) if job[0] == "loop" else _recognise(job[1])
 
 
 def _can_fork() -> bool:
@@ -785,7 +814,7 @@ WINDOW_FACTOR = 2.0
 WINDOW_MARGIN = 20
 
 
-def _align_long(piece, chunks, transcript, energy, bar):
+def _align_long(piece, chunks, transcript, energy, bar, recogniser: str = "recognise"):
     """Align a long transcript chunk by chunk, each taking the next words that fit it.
 
     Returns (timings per chunk, words skipped, number of words that could not be aligned).
@@ -808,7 +837,7 @@ def _align_long(piece, chunks, transcript, energy, bar):
         forced = _force_align(piece(a, b), kept) if kept else _Forced([])
         if forced is None:  # the words found do not align after all: what is heard there
             failed += len(kept)
-            got = _recognise(piece(a, b))[1]
+            got = _chunk_job((recogniser, piece(a, b)))[1]
         else:
             got = forced.timings
         per_chunk.append(got)
@@ -846,7 +875,7 @@ def read_transcript(text: Optional[str]) -> Optional[str]:
 
 
 def align_samples(pcm: np.ndarray, text: Optional[str] = None, *, quiet: bool = True,
-                  path: Optional[str] = None, jobs: Optional[int] = None) -> Alignment:
+                  path: Optional[str] = None, jobs: Optional[int] = None, lang: Optional[str] = None) -> Alignment:
     """Align 16 kHz mono int16 samples with an optional transcript.
 
     Parameters
@@ -862,10 +891,20 @@ def align_samples(pcm: np.ndarray, text: Optional[str] = None, *, quiet: bool = 
     jobs : int, optional
         Processes for long or untranscribed audio, and from 2 on a second one that checks
         a transcript's fit beside its alignment (default: all cores; 1: none).
+    lang : str, optional
+        The language (BCP 47: ``fr``, ``pt-BR``, ``zh``); None or English: CMUdict and
+        ARPAbet phones. Any other: :func:`lipsync.speech.languages.align_language` (IPA
+        phones; needs the optional espeak-ng extra).
 
     Returns
     -------
     Alignment
+
+    Raises
+    ------
+    lipsync.errors.InputError
+        An English transcript with no word in Latin letters (Cyrillic, Chinese, ...): the
+        message names the script and the ``--lang`` to pass; an unknown ``lang``.
 
     Warns
     -----
@@ -882,21 +921,49 @@ def align_samples(pcm: np.ndarray, text: Optional[str] = None, *, quiet: bool = 
     >>> len(al.words), len(al.phones), al.duration
     (0, 0, 1.0)
     """
-    from tqdm import tqdm
+    from ..phonetics.g2p import is_english
 
-    pcm = np.asarray(pcm)
-    if pcm.dtype.kind == "f":
-        pcm = np.clip(np.round(pcm * 32767.0), -32768, 32767).astype(np.int16)
-    pcm = pcm.astype(np.int16, copy=False).reshape(-1)
-    duration = len(pcm) / SAMPLE_RATE
-    workers = max(1, jobs if jobs is not None else (os.cpu_count() or 1))
+    if not is_english(lang):
+        from .languages import align_language
+
+        return align_language(pcm, text, lang, quiet=quiet, path=path, jobs=jobs)
+    pcm = _as_pcm(pcm)
     transcript = tuple(normalise_transcript(text)) if text is not None else ()
-    has_text = bool(transcript)  # blank or punctuation only: no words, so recognise
+    if text is not None:
+        from .languages import check_english_script
+
+        check_english_script(text, transcript, path=path)
     missing = tuple(lookup_missing(transcript))
     if missing:
         warnings.warn(f"{path or 'transcript'}: {len(missing)} word(s) not in the dictionary, "
                       f"pronounced by letter-to-sound rules: {', '.join(missing)}",
                       MissingWordsWarning, stacklevel=2)
+    return _align_pcm(pcm, transcript, quiet=quiet, path=path, jobs=jobs, missing=missing)
+
+
+def _as_pcm(pcm) -> np.ndarray:
+    """16-bit samples of int16 or -1..1 float input, flat."""
+    pcm = np.asarray(pcm)
+    if pcm.dtype.kind == "f":
+        pcm = np.clip(np.round(pcm * 32767.0), -32768, 32767).astype(np.int16)
+    return pcm.astype(np.int16, copy=False).reshape(-1)
+
+
+def _align_pcm(pcm: np.ndarray, transcript: Tuple[str, ...], *, quiet: bool, path: Optional[str],
+               jobs: Optional[int], missing: Tuple[str, ...] = (), recogniser: str = "recognise",
+               shown=None) -> Alignment:
+    """:func:`align_samples` once the transcript is words the decoder can name.
+
+    ``recogniser`` is what listens where no transcript fits ("recognise": US-English words;
+    "loop": free phones, for other languages); ``shown`` turns decoder names into the
+    words the messages show.
+    """
+    from tqdm import tqdm
+
+    show = shown or (lambda w: w)
+    duration = len(pcm) / SAMPLE_RATE
+    workers = max(1, jobs if jobs is not None else (os.cpu_count() or 1))
+    has_text = bool(transcript)  # blank or punctuation only: no words, so recognise
     energy = _frame_energy(pcm)
     if len(energy) == 0 or float(energy.max()) < SILENCE_DBFS:
         return Alignment(_timeline((), duration, path), _timeline((), duration, path), duration,
@@ -922,7 +989,7 @@ def align_samples(pcm: np.ndarray, text: Optional[str] = None, *, quiet: bool = 
         else:
             if has_text and duration > MAX_CHUNK_S:
                 chunks = _plan_chunks(energy, MAX_CHUNK_S)
-                per_chunk, skipped, failed = _align_long(piece, chunks, transcript, energy, bar)
+                per_chunk, skipped, failed = _align_long(piece, chunks, transcript, energy, bar, recogniser)
             else:
                 # No transcript, or a short one that does not fit at all: recognise chunk by
                 # chunk (in parallel when there are enough), then align what was heard.
@@ -930,7 +997,7 @@ def align_samples(pcm: np.ndarray, text: Optional[str] = None, *, quiet: bool = 
                 bar.total = len(chunks)
                 bar.refresh()
                 workers = workers if len(chunks) >= MIN_CHUNKS_FOR_WORKERS else 1
-                per_chunk = [t for _, t in _run_jobs([("recognise", piece(a, b)) for a, b in chunks], workers, bar)]
+                per_chunk = [t for _, t in _run_jobs([(recogniser, piece(a, b)) for a, b in chunks], workers, bar)]
                 failed, skipped = len(transcript), []
             for (a, _), got in zip(chunks, per_chunk):
                 timings += [(w, ws + a, we + a, [(p, ps + a, pe + a) for p, ps, pe in ph])
@@ -952,7 +1019,7 @@ def align_samples(pcm: np.ndarray, text: Optional[str] = None, *, quiet: bool = 
             what = "does not fit the audio"
             if skipped:
                 what += (f": {len(skipped)} of its {len(transcript)} words were not found and were left out "
-                         f"({_some(skipped)})")
+                         f"({_some([show(w) for w in skipped])})")
             if failed:
                 what += (f"{',' if skipped else ':'} {failed} of its {len(transcript)} words could not be "
                          "aligned, and the words recognised there were used instead")
@@ -960,7 +1027,7 @@ def align_samples(pcm: np.ndarray, text: Optional[str] = None, *, quiet: bool = 
                 what = "fits the audio poorly; the alignment is a best effort"
             warnings.warn(f"{path or 'audio'}: the transcript {what} (confidence {confidence:.2f}: the "
                           "smallest of the share of its words found, the share of the speech they cover "
-                          "and how well they match the sounds)", AlignmentWarning, stacklevel=2)
+                          "and how well they match the sounds)", AlignmentWarning, stacklevel=3)
     return _to_alignment(timings, duration, path, transcript if has_text else tuple(w for w, *_ in timings),
                          recognised=not has_text or failed > 0, confidence=confidence, missing=missing,
                          skipped=tuple(skipped) if has_text else ())
@@ -991,7 +1058,7 @@ def _speech_in_words(energy: np.ndarray, timings: List[_WordTiming]) -> float:
 
 
 def align(audio: Union[PathLike, np.ndarray], text: Optional[str] = None, *, quiet: bool = True,
-          jobs: Optional[int] = None) -> Alignment:
+          jobs: Optional[int] = None, lang: Optional[str] = None) -> Alignment:
     """Words and phones of a recording, with or without its transcript.
 
     Parameters
@@ -1006,6 +1073,8 @@ def align(audio: Union[PathLike, np.ndarray], text: Optional[str] = None, *, qui
     jobs : int, optional
         Processes for long or untranscribed audio, and from 2 on a second one that checks
         a transcript's fit beside its alignment (default: all cores; 1: none).
+    lang : str, optional
+        The language of the speech (BCP 47), see :func:`align_samples`.
 
     Returns
     -------
@@ -1015,6 +1084,8 @@ def align(audio: Union[PathLike, np.ndarray], text: Optional[str] = None, *, qui
     ------
     lipsync.speech.audio.AudioError
         The audio file cannot be read (the message names it).
+    lipsync.errors.InputError
+        A transcript the language cannot read; an unknown ``lang``.
 
     Examples
     --------
@@ -1035,7 +1106,7 @@ def align(audio: Union[PathLike, np.ndarray], text: Optional[str] = None, *, qui
     else:
         path = os.fspath(audio)
         pcm = load_audio(path)
-    return align_samples(pcm, read_transcript(text), quiet=quiet, path=path, jobs=jobs)
+    return align_samples(pcm, read_transcript(text), quiet=quiet, path=path, jobs=jobs, lang=lang)
 
 
 def _timeline(segments, duration: float, path: Optional[str]) -> Timeline:
