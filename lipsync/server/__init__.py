@@ -172,7 +172,7 @@ class LiveServer:
                 # as `lipsync render --fps` checks it (fps=0 once rendered at the default 25)
                 fps = check_fps(q["fps"]) if "fps" in q else None
                 job = self.jobs.submit(body, q.get("name", ""), text=q.get("text"),
-                                       timeline_format=q.get("format"), fps=fps)
+                                       timeline_format=q.get("format"), fps=fps, lang=q.get("lang"))
             except (InputError, ValueError) as exc:
                 return JSONResponse({"error": str(exc)}, status_code=400)
             except Busy as exc:

@@ -99,7 +99,7 @@ def check_english_script(text: str, words: Sequence[str], *, path: Optional[str]
     >>> check_english_script("привет мир", [])
     Traceback (most recent call last):
     ...
-    lipsync.errors.InputError: transcript: it is written in Cyrillic letters, which the English aligner cannot read: pass the language, for example --lang ru
+    lipsync.errors.InputError: the transcript is written in Cyrillic letters, which the English aligner cannot read: pass the language, for example --lang ru
     """
     from .. import phonetics  # noqa: F401  (the room exists: the hint below names its --lang)
 
@@ -108,12 +108,48 @@ def check_english_script(text: str, words: Sequence[str], *, path: Optional[str]
         return
     script, suggestion = _SCRIPTS.get(script_of(unread[0]), (script_of(unread[0]).title(), "CODE"))
     if not words:
-        raise InputError(f"it is written in {script} letters, which the English aligner cannot read: "
-                         f"pass the language, for example --lang {suggestion}", path=path or "transcript")
+        raise InputError(f"the transcript is written in {script} letters, which the English aligner cannot read: "
+                         f"pass the language, for example --lang {suggestion}", path=path)
     shown = ", ".join(unread[:8]) + (f" and {len(unread) - 8} more" if len(unread) > 8 else "")
     warnings.warn(f"{path or 'transcript'}: {len(unread)} word(s) in {script} letters cannot be read by the "
                   f"English aligner and were left out ({shown}); pass the language, for example --lang "
                   f"{suggestion}", UnreadWordsWarning, stacklevel=3)
+
+
+def check_transcript(text: str, lang: Optional[str] = None, *, path: Optional[str] = None) -> None:
+    """Refuse a transcript none of whose words ``lang`` can read, before any long work.
+
+    English: :func:`check_english_script`; other languages: the words espeak-ng reads in
+    the language (:func:`lipsync.phonetics.g2p.transcribe`).
+
+    Raises
+    ------
+    lipsync.errors.InputError
+        No word can be read (the message names the script or the words, and ``--lang``).
+
+    Examples
+    --------
+    >>> check_transcript("Hello there")
+    >>> check_transcript("经广州日报报道", None, path="clip.txt")
+    Traceback (most recent call last):
+    ...
+    lipsync.errors.InputError: clip.txt: the transcript is written in Chinese (Han) letters, which the English aligner cannot read: pass the language, for example --lang zh
+    """
+    from ..phonetics.g2p import is_english
+
+    if is_english(lang):
+        from .text import normalise_transcript
+
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", UnreadWordsWarning)  # warned when aligned
+            check_english_script(text, normalise_transcript(text), path=path)
+        return
+    from ..phonetics.g2p import languages, resolve, transcribe
+
+    words = transcribe(text, lang)
+    if words and not any(w.read and w.phones for w in words):
+        raise InputError(f"none of the transcript's words can be read as {languages()[resolve(lang)]} (--lang {lang}): "
+                         f"{', '.join(w.text for w in words[:8])}", path=path)
 
 
 # --- IPA segments to en-us acoustic units and back -------------------------------------------
@@ -192,8 +228,8 @@ def align_language(pcm, text: Optional[str], lang: str, *, quiet: bool = True, p
     unread = [w.text for w in words if not (w.read and w.phones)]
     read = [w for w in words if w.read and w.phones]
     if words and not read:
-        raise InputError(f"none of its words can be read as {languages()[code]} (--lang {lang}): "
-                         f"{', '.join(unread[:8])}", path=path or "transcript")
+        raise InputError(f"none of the transcript's words can be read as {languages()[code]} (--lang {lang}): "
+                         f"{', '.join(unread[:8])}", path=path)
     if unread:
         warnings.warn(f"{path or 'transcript'}: {len(unread)} word(s) cannot be read as {languages()[code]} and "
                       f"were left out: {', '.join(unread[:8])}", UnreadWordsWarning, stacklevel=3)
