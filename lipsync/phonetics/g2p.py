@@ -449,26 +449,26 @@ def transcribe(text: str, lang: str) -> List[Word]:
 
 # --- speech with a known phoneme timeline --------------------------------------------------
 
-def synthesise(text: str, lang: str) -> Tuple[np.ndarray, List[Tuple[float, str]]]:
-    """espeak-ng's speech of ``text`` and the time each phoneme starts.
+def synthesise(text: str, lang: str) -> Tuple[np.ndarray, List[Tuple[float, float, str]]]:
+    """espeak-ng's speech of ``text`` and when each of its phonemes is spoken.
 
     Returns
     -------
     samples : numpy.ndarray
         int16 mono at :data:`SYNTH_RATE`.
-    phonemes : list of (float, str)
-        (start in seconds, IPA name as espeak-ng reports it, stress marks removed), in
-        order; a phoneme lasts until the next one starts (the last until the audio ends).
-        Pauses are reported as phonemes named ``_``... and are kept out, so they show as
-        gaps between one phoneme's start and the next.
+    phonemes : list of (float, float, str)
+        (start, end in seconds, IPA name as espeak-ng reports it with stress and tone marks
+        removed), in order. espeak-ng reports the moment each phoneme starts; one ends
+        where the next phoneme or pause starts (the last where the audio ends). Pauses
+        (espeak's ``_`` phonemes) are left out, so they show as gaps.
 
     Examples
     --------
     >>> if espeak_available():
-    ...     pcm, ph = synthesise("papa", "fr"); print([p for _, p in ph])
+    ...     pcm, ph = synthesise("papa", "fr"); print([p for _, _, p in ph], ph[0][1] == ph[1][0])
     ... else:
-    ...     print(['p', 'a', 'p', 'a'])
-    ['p', 'a', 'p', 'a']
+    ...     print(['p', 'a', 'p', 'a'], True)
+    ['p', 'a', 'p', 'a'] True
     """
     code = resolve(lang)
     chunks: List[np.ndarray] = []
@@ -481,6 +481,8 @@ def synthesise(text: str, lang: str) -> Tuple[np.ndarray, List[Tuple[float, str]
         while ev[i].type != _EVENT_LIST_TERMINATED:
             if ev[i].type == _EVENT_PHONEME:
                 events.append((int(ev[i].sample), bytes(ev[i].id.string).split(b"\0")[0].decode("utf-8", "replace")))
+            elif ev[i].type in (_EVENT_END, _EVENT_MSG_TERMINATED):
+                events.append((int(ev[i].sample), "_"))
             i += 1
         return 0
 
@@ -492,11 +494,58 @@ def synthesise(text: str, lang: str) -> Tuple[np.ndarray, List[Tuple[float, str]
         lib.espeak_SetSynthCallback(cb)
         lib.espeak_Synth(raw, len(raw), 0, 0, 0, _CHARS_UTF8, None, None)
         lib.espeak_Synchronize()
-    pcm = np.concatenate(chunks) if chunks else np.zeros(0, np.int16)
-    # event sample positions count from the start of the text's synthesis
-    phonemes = []
-    for sample, name in events:
-        name = _DROP.sub("", name)
-        if name and not name.startswith("_"):
-            phonemes.append((sample / SYNTH_RATE, name))
-    return pcm.astype(np.int16), phonemes
+        _CURRENT[0] = _voices()[code][0]
+        names = [(sample, _clean([name])) for sample, name in events]
+    pcm = np.concatenate(chunks).astype(np.int16) if chunks else np.zeros(0, np.int16)
+    end = len(pcm) / SYNTH_RATE
+    events.sort(key=lambda e: e[0])
+    phonemes: List[Tuple[float, float, str]] = []
+    for k, (sample, name) in enumerate(names):
+        nxt = names[k + 1][0] / SYNTH_RATE if k + 1 < len(names) else end
+        label = name[0] if name else ""
+        if label and not label.startswith("_") and nxt > sample / SYNTH_RATE:
+            start = sample / SYNTH_RATE
+            if label[0] in _UNVOICED_STOPS:
+                floor = int(round(phonemes[-1][0] * SYNTH_RATE)) if phonemes else 0
+                floor = max(floor, sample - int(_CLOSURE_MAX_S * SYNTH_RATE))
+                closure = _closure_start(pcm, sample, floor)
+                if closure < sample:
+                    start = closure / SYNTH_RATE
+                    if phonemes and phonemes[-1][1] > start:
+                        a, _, prev = phonemes[-1]
+                        phonemes[-1] = (a, start, prev)
+            phonemes.append((start, min(nxt, end), label))
+    return pcm, phonemes
+
+
+#: Phonemes espeak-ng reports at their release (first letters of the IPA name): unvoiced
+#: stops and the affricates that begin with one. Their silent closure is written as digital
+#: silence at the end of the phoneme before (measured: French "appelle", 35 ms of zeros
+#: before the event of p), so :func:`synthesise` gives it back to the stop, as a mouth
+#: closes for the closure. Voiced stops are reported at their closure (their voice bar
+#: starts at the event).
+_UNVOICED_STOPS = frozenset("ptkqcʈʔ")
+#: Shortest run of digital silence taken as a closure (shorter runs are waveform zero
+#: crossings), and how far before the event the run may end.
+_CLOSURE_MIN_S, _CLOSURE_SLACK_S = 0.005, 0.003
+#: Longest closure: after a pause the silence before a stop is the pause's too, and lips
+#: close for about this long before a release (as the aligner's MAX_PAUSE_CLOSURE_S).
+_CLOSURE_MAX_S = 0.08
+
+
+def _closure_start(pcm: np.ndarray, sample: int, floor: int) -> int:
+    """First sample of the run of digital silence that ends at (or just before) ``sample``."""
+    quiet = np.abs(pcm[max(floor, 0):sample].astype(np.int32)) <= 1
+    if not len(quiet):
+        return sample
+    slack = int(_CLOSURE_SLACK_S * SYNTH_RATE)
+    loud = np.flatnonzero(~quiet)
+    # end of the run: the last quiet sample within the slack before the event
+    tail = len(quiet)
+    while tail > 0 and len(quiet) - tail < slack and not quiet[tail - 1]:
+        tail -= 1
+    before = loud[loud < tail]
+    head = int(before[-1]) + 1 if len(before) else 0
+    if tail - head < _CLOSURE_MIN_S * SYNTH_RATE:
+        return sample
+    return max(floor, 0) + head
