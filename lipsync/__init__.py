@@ -42,7 +42,8 @@ _EXPORTS = {
     "LiveAnimator": "live",
 }
 _SUBMODULES = {"warp", "bank", "normalise", "flows", "store", "render", "timeline", "phonemes",
-               "sequencer", "timing", "coarticulation", "encode", "animator", "registry", "errors", "cli", "preview", "clip", "live"}
+               "sequencer", "timing", "coarticulation", "encode", "animator", "registry", "errors", "cli", "preview", "clip", "live",
+               "phonetics"}
 
 
 def __getattr__(name: str) -> Any:

@@ -11,8 +11,21 @@
   Rhubarb's shapes) and ``phoneset``.
 
 A label is looked up in this order: as written in ``map``; as a silence label (of the
-phone set, case-insensitive); through the phone set to its canonical phone; upper-cased.
-A label none of these finds goes to ``fallback`` with one warning per label.
+phone set, case-insensitive); through the phone set to its canonical phone; upper-cased;
+then, for any phone of any language, by the map's feature ``rules``
+(:mod:`lipsync.phonetics.visemes`: the IPA segment's place, manner, rounding, height...).
+A label none of these finds -- one that is not a phone at all -- goes to ``fallback`` with
+one warning per label.
+
+``rules`` in a map file is the name of a shipped rule set (``rhubarb``, ``oculus``), a
+list of rows such as ``{place: bilabial, viseme: A}``, or ``none``. A map that does not
+say uses the shipped rule set whose visemes it has (a map of Rhubarb's A-H gets
+``rhubarb``), so maps written before rules existed keep working and gain every language.
+
+:func:`map_timeline` reads a timeline's notation from all its labels
+(:func:`lipsync.phonetics.detect`): in an IPA timeline ``y``, ``r`` and ``q`` are IPA's
+rounded vowel, trill and uvular stop (not ARPAbet's glide, English r and TIMIT's glottal
+stop); a pinyin timeline (``j``, ``ing1``, ``iii4``) is read as pinyin.
 
 Examples
 --------
@@ -30,12 +43,14 @@ import os
 import re
 import warnings
 from pathlib import Path
-from typing import Dict, Iterable, List, Mapping, Optional, Sequence, Tuple, Union
+from typing import Any, Dict, Iterable, List, Mapping, Optional, Sequence, Tuple, Union
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
+from . import phonetics
 from ._data import data_dir
 from .errors import MapError, TimelineError, UnknownNameError
+from .phonetics import visemes as _rules
 from .registry import Registry
 from .timeline import VISEME, Segment, Timeline
 
@@ -136,6 +151,19 @@ class PhonemeMap(BaseModel):
     breath: Optional[str] = None
     aliases: Dict[str, List[str]] = Field(default_factory=dict)
     phoneset: Optional[str] = DEFAULT_PHONESET
+    # Feature rules for labels `map` lacks: a shipped rule set's name, rows, "none", or
+    # None (the shipped rule set whose visemes the map has, if any).
+    rules: Optional[Union[str, List[Dict[str, Any]]]] = None
+
+    @field_validator("rules")
+    @classmethod
+    def _rules_valid(cls, v):
+        if isinstance(v, str):
+            if v != "none" and v not in _rules.RULESETS:
+                raise ValueError(f"unknown rule set {v!r}; one of {', '.join(_rules.RULESETS)}, none, or a list of rows")
+        elif v is not None:
+            _rules.compile_rules(v)
+        return v
 
     @field_validator("silence", "fallback")
     @classmethod
@@ -166,12 +194,31 @@ class PhonemeMap(BaseModel):
             raise ValueError(f"aliases given for visemes the map never uses: {', '.join(bad)}")
         return self
 
-    def visemes(self) -> List[str]:
-        """Every viseme the map can produce (sorted)."""
+    def _own_visemes(self) -> set:
         out = {self.silence, self.fallback}
         for target in self.map.values():
             out.update([target] if isinstance(target, str) else target)
-        return sorted(out)
+        return out
+
+    def visemes(self) -> List[str]:
+        """Every viseme the map can produce (sorted), its rules' included."""
+        return sorted(self._own_visemes() | set(_rules.rules_visemes(self._compiled_rules)))
+
+    @functools.cached_property
+    def _compiled_rules(self) -> tuple:
+        """The feature rules in use (see the module docstring); () for none."""
+        if self.rules == "none":
+            return ()
+        if isinstance(self.rules, str):
+            return _rules.compiled(self.rules)
+        if self.rules is not None:
+            return _rules.compile_rules(self.rules)
+        own = self._own_visemes()
+        for name in _rules.RULESETS:
+            rules = _rules.compiled(name)
+            if set(_rules.rules_visemes(rules)) <= own:
+                return rules
+        return ()
 
     @functools.cached_property
     def _phoneset(self) -> Optional[PhoneSet]:
@@ -184,12 +231,39 @@ class PhonemeMap(BaseModel):
             return ps.is_silence(label)
         return label.strip().lower() in _BUILTIN_SILENCE
 
-    def targets(self, label: str) -> Optional[List[str]]:
-        """The visemes for ``label`` (several for a split phone), or None if unknown."""
+    def targets(self, label: str, *, notation: Optional[str] = None) -> Optional[List[str]]:
+        """The visemes for ``label`` (several for a split phone), or None if unknown.
+
+        ``notation`` is the timeline's (:func:`lipsync.phonetics.detect`); None reads the
+        label alone, as English first (``y`` is ARPAbet's glide), then as IPA.
+
+        Examples
+        --------
+        >>> m = load_map("rhubarb")
+        >>> m.targets("y"), m.targets("y", notation="ipa"), m.targets("ʁ"), m.targets("j", notation="pinyin")
+        (['B'], ['F'], ['B'], ['B'])
+        """
         if label in self.map:
             return _as_list(self.map[label])
         if self.is_silence(label):
             return [self.silence]
+        if notation in (None, "english", "arpabet", "timit", "mfa") or (
+                notation == "ipa" and label.strip() not in _IPA_NOT_ENGLISH):
+            english = self._english_targets(label)
+            if english is not None or notation in ("english", "arpabet", "timit"):
+                return english
+            return self._feature_targets(label)
+        if notation == "ipa":
+            return self._feature_targets(label)
+        ipa = phonetics.to_ipa(label, notation)
+        if ipa == "":
+            return [self.silence]
+        if ipa is None:  # not of that notation (a stray ARPAbet label in a pinyin tier): read alone
+            return self.targets(label)
+        parts = phonetics.segments.parse_sequence(ipa)
+        return _rules.parts_visemes(parts, self._compiled_rules) if parts else None
+
+    def _english_targets(self, label: str) -> Optional[List[str]]:
         ps = self._phoneset
         if ps is not None:
             canon = ps.normalise(label)
@@ -201,10 +275,17 @@ class PhonemeMap(BaseModel):
             return _as_list(self.map[label.upper()])
         return None
 
+    def _feature_targets(self, label: str) -> Optional[List[str]]:
+        if not self._compiled_rules:
+            return None
+        return _rules.label_visemes(label, self._compiled_rules)
+
     def renamed(self, names: Mapping[str, str]) -> "PhonemeMap":
         """A copy with every viseme renamed through ``names`` (missing keys unchanged)."""
         r = lambda v: names.get(v, v)  # noqa: E731
+        rules = _rules.renamed_rules(self._compiled_rules, names) if self._compiled_rules else "none"
         return self.model_copy(update=dict(
+            rules=rules,
             silence=r(self.silence), fallback=r(self.fallback),
             map={k: (r(t) if isinstance(t, str) else [r(x) for x in t]) for k, t in self.map.items()},
             closures=[r(c) for c in self.closures],
@@ -213,7 +294,12 @@ class PhonemeMap(BaseModel):
 
 
 # Used only by maps that name no phone set.
-_BUILTIN_SILENCE = frozenset(["", "sil", "sp", "spn", "h#", "pau", "epi", "<sil>", "<eps>", "silence"])
+_BUILTIN_SILENCE = phonetics.SILENCE
+
+# ASCII labels that are one sound in ARPAbet/TIMIT and another in IPA: read as IPA in a
+# timeline whose notation is IPA (y: rounded vowel, not the glide; r: trill, not English r;
+# q: uvular stop, not TIMIT's glottal stop).
+_IPA_NOT_ENGLISH = frozenset({"y", "r", "q"})
 
 
 def _as_list(target: Union[str, List[str]]) -> List[str]:
@@ -353,13 +439,16 @@ def load_map(name_or_path: Union[str, PathLike, None] = None) -> PhonemeMap:
 # --- mapping ------------------------------------------------------------------------------
 
 
-def map_timeline(timeline: Timeline, pmap: PhonemeMap, *, rest: Optional[str] = None) -> Timeline:
+def map_timeline(timeline: Timeline, pmap: PhonemeMap, *, rest: Optional[str] = None,
+                 notation: Optional[str] = None) -> Timeline:
     """Phoneme timeline -> viseme timeline.
 
     Silence labels, and gaps (time with no segment, up to the file's stated end), become
     ``rest`` if given, else ``pmap.silence``, so the result covers the whole file. A phone mapped to several visemes has its time split
     evenly among them. Unknown labels map to ``pmap.fallback``, with one
     :class:`UnknownLabelWarning` per distinct label. A viseme timeline is returned unchanged.
+    ``notation`` (``ipa``, ``english``, ``pinyin``, ``xsampa``, ``espeak``; see
+    :data:`lipsync.phonetics.NOTATIONS`) is detected from the labels when not given.
 
     Examples
     --------
@@ -374,6 +463,8 @@ def map_timeline(timeline: Timeline, pmap: PhonemeMap, *, rest: Optional[str] = 
     """
     if timeline.kind == VISEME:
         return timeline
+    if notation is None:
+        notation = phonetics.detect(s.label for s in timeline)
     cache: Dict[str, List[str]] = {}
     unknown: List[str] = []
     segments: List[Segment] = []
@@ -388,7 +479,7 @@ def map_timeline(timeline: Timeline, pmap: PhonemeMap, *, rest: Optional[str] = 
             if seg.label not in pmap.map and pmap.is_silence(seg.label):
                 targets = [silence]
             else:
-                targets = pmap.targets(seg.label)
+                targets = pmap.targets(seg.label, notation=notation)
                 if targets is None:
                     unknown.append(seg.label)
                     targets = [pmap.fallback]
@@ -405,13 +496,16 @@ def map_timeline(timeline: Timeline, pmap: PhonemeMap, *, rest: Optional[str] = 
     return Timeline(tuple(segments), kind=VISEME, path=timeline.path, stated_end=timeline.stated_end)
 
 
-def unknown_labels(timeline: Timeline, pmap: PhonemeMap) -> List[str]:
+def unknown_labels(timeline: Timeline, pmap: PhonemeMap, *, notation: Optional[str] = None) -> List[str]:
     """Distinct labels of a phoneme timeline that ``pmap`` does not know, in order of appearance."""
     if timeline.kind == VISEME:
         return []
+    if notation is None:
+        notation = phonetics.detect(s.label for s in timeline)
     seen: Dict[str, None] = {}
     for seg in timeline:
-        if seg.label not in seen and not pmap.is_silence(seg.label) and pmap.targets(seg.label) is None:
+        if (seg.label not in seen and not pmap.is_silence(seg.label)
+                and pmap.targets(seg.label, notation=notation) is None):
             seen[seg.label] = None
     return list(seen)
 

@@ -9,7 +9,9 @@ praatio parses the file. Alongside it, a small token scan (:func:`_scan`) walks 
 structure to know the line of every interval (praatio keeps none), to check the structure
 and report the line where it breaks, and to keep the sign of times (praatio's long-form
 parser drops a leading minus). Empty intervals are gaps; ARPAbet stress digits (``AH0``)
-are removed; IPA labels are kept as written (Unicode NFC).
+are removed; IPA labels are read by :func:`lipsync.phonetics.canonical` (Unicode NFC,
+ligatures written out: ``ʧ`` is ``tʃ``); other digits are kept, since in pinyin (``ing1``)
+and IPA tone numbers they tell the notation apart (the maps drop tone).
 """
 
 from __future__ import annotations
@@ -19,6 +21,8 @@ import unicodedata
 from typing import List, NamedTuple, Optional, Tuple
 
 from ..errors import TimelineError
+from ..phonetics.notations import ARPABET_VOWELS, detect
+from ..phonetics.segments import canonical
 from ..timeline import PHONEME, VISEME, Timeline
 from .base import READERS, Reader, ReadOptions
 from ._common import build, decode_text, sniff_text
@@ -28,7 +32,7 @@ DEFAULT_TIER = "phones"
 # chosen when a file has no phones tier.
 VISEME_TIER = "visemes"
 
-_STRESS = re.compile(r"^([A-Za-z]+)[0-2]$")
+_STRESS = re.compile(r"^([A-Za-z]{2})[0-2]$")  # ARPAbet's vowels are two letters: AH0, ow1
 
 _TOKEN = re.compile(r'''
     (?P<str>"(?:[^"]|"")*")
@@ -58,16 +62,18 @@ class _Tier(NamedTuple):
 
 
 def normalise_label(label: str) -> str:
-    """NFC, and ARPAbet stress digits removed: ``"AH0"`` -> ``"AH"``; IPA unchanged.
+    """NFC, and ARPAbet stress digits removed: ``"AH0"`` -> ``"AH"``; IPA in one spelling.
 
     Examples
     --------
-    >>> normalise_label("AH0"), normalise_label("tʲ"), normalise_label("")
-    ('AH', 'tʲ', '')
+    >>> normalise_label("AH0"), normalise_label("tʲ"), normalise_label(""), normalise_label("ing1"), normalise_label("ʦ")
+    ('AH', 'tʲ', '', 'ing1', 'ts')
     """
     label = unicodedata.normalize("NFC", label.strip())
     m = _STRESS.match(label)
-    return m.group(1) if m else label
+    if m and m.group(1).upper() in ARPABET_VOWELS:
+        return m.group(1)
+    return canonical(label) if not label.isascii() else label
 
 
 def _tokens(path: str, text: str) -> List[_Tok]:
@@ -216,7 +222,10 @@ def read(path: str, data: bytes, options: ReadOptions) -> Timeline:
     if parsed is not None and len(parsed.get(tier.name, ())) == len(entries):
         # praatio's labels (it strips and unescapes them); our times keep their sign.
         entries = [(a, b, p[2], line) for (a, b, _, line), p in zip(entries, parsed[tier.name])]
-    rows = [(a, b, normalise_label(label), line) for a, b, label, line in entries]
+    # A pinyin tier (ing1, ao1, er2) keeps its tone digits: "ao1" is pinyin ao, not ARPAbet AO1.
+    pinyin = detect(label for _, _, label, _ in entries) == "pinyin"
+    rows = [(a, b, unicodedata.normalize("NFC", label.strip()) if pinyin else normalise_label(label), line)
+            for a, b, label, line in entries]
     end = tier.xmax if tier.xmax > 0 else xmax
     return build(path, rows, VISEME if tier.name == VISEME_TIER else PHONEME, stated_end=end)
 
