@@ -312,14 +312,29 @@ _TRAILING_TONE = re.compile(r"(?<=.)[0-9ɜ]+$")
 _DIGITS = re.compile(r"[0-9]")
 
 
+#: espeak-ng's Mandarin voice writes retroflexes with a full stop after the letter, which is
+#: no IPA (the phonetics room's espeak normaliser is asked for these too).
+_ESPEAK_MANDARIN = {"ts.h": "ʈʂʰ", "ts.": "ʈʂ", "s.": "ʂ", "z.": "ʐ", "i.": "ɨ"}
+
+
 def _clean(phonemes: List[str]) -> Tuple[str, ...]:
+    """IPA segments of espeak-ng phonemes: stress, tone and link marks dropped, espeak's own
+    spellings made IPA (:func:`lipsync.phonetics.to_ipa`), and a phoneme that is more than
+    one segment (Russian я is one phoneme "ja") split into its segments; diphthongs and
+    affricates stay one segment (the maps split them in time)."""
+    from .notations import to_ipa
+    from .segments import parse, split
+
     # ɜ is a tone only after a tone voice's vowel (elsewhere it is the open-mid vowel)
     tones = _TRAILING_TONE if _CURRENT[0] in _TONE_VOICES else _DIGITS
-    out = []
+    out: List[str] = []
     for p in phonemes:
         p = tones.sub("", _DROP.sub("", p))
-        if p:
-            out.append(p)
+        if not p:
+            continue
+        p = _ESPEAK_MANDARIN.get(p, p)
+        ipa = to_ipa(p, "espeak") or p
+        out.extend([ipa] if parse(ipa) is not None else (split(ipa) or [ipa]))
     return tuple(out)
 
 
@@ -495,7 +510,7 @@ def synthesise(text: str, lang: str) -> Tuple[np.ndarray, List[Tuple[float, floa
         lib.espeak_Synth(raw, len(raw), 0, 0, 0, _CHARS_UTF8, None, None)
         lib.espeak_Synchronize()
         _CURRENT[0] = _voices()[code][0]
-        names = [(sample, _clean([name])) for sample, name in events]
+        names = [(sample, _clean([name]) if name != "_" else ()) for sample, name in events]
     pcm = np.concatenate(chunks).astype(np.int16) if chunks else np.zeros(0, np.int16)
     end = len(pcm) / SYNTH_RATE
     events.sort(key=lambda e: e[0])
@@ -503,7 +518,7 @@ def synthesise(text: str, lang: str) -> Tuple[np.ndarray, List[Tuple[float, floa
     for k, (sample, name) in enumerate(names):
         nxt = names[k + 1][0] / SYNTH_RATE if k + 1 < len(names) else end
         label = name[0] if name else ""
-        if label and not label.startswith("_") and nxt > sample / SYNTH_RATE:
+        if label and nxt > sample / SYNTH_RATE:
             start = sample / SYNTH_RATE
             if label[0] in _UNVOICED_STOPS:
                 floor = int(round(phonemes[-1][0] * SYNTH_RATE)) if phonemes else 0
@@ -514,7 +529,9 @@ def synthesise(text: str, lang: str) -> Tuple[np.ndarray, List[Tuple[float, floa
                     if phonemes and phonemes[-1][1] > start:
                         a, _, prev = phonemes[-1]
                         phonemes[-1] = (a, start, prev)
-            phonemes.append((start, min(nxt, end), label))
+            # a phoneme of several segments (Russian "ja") shares its time evenly among them
+            edges = np.linspace(start, min(nxt, end), len(name) + 1)
+            phonemes += [(float(a), float(b), seg) for a, b, seg in zip(edges[:-1], edges[1:], name)]
     return pcm, phonemes
 
 

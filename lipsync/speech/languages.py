@@ -155,19 +155,18 @@ def check_transcript(text: str, lang: Optional[str] = None, *, path: Optional[st
 # --- IPA segments to en-us acoustic units and back -------------------------------------------
 
 def _units(phone: str) -> Tuple[str, ...]:
-    """The en-us ARPAbet acoustic units standing for one IPA segment (closest by features)."""
-    from ..phonetics import closest_english
+    """The en-us ARPAbet acoustic units standing for one IPA segment (closest by features;
+    an affricate or diphthong English lacks gets two or three)."""
+    from ..phonetics import english_phones
 
-    got = closest_english(phone)
-    return (got,) if isinstance(got, str) else tuple(got)
+    return tuple(english_phones(phone)) or ("AH",)
 
 
 def _ipa_of_unit(unit: str) -> str:
     """An ARPAbet phone (stress digit allowed) written in IPA."""
-    from ..phonetics import arpabet_to_ipa
+    from ..phonetics import to_ipa
 
-    got = arpabet_to_ipa(unit.rstrip("012"))
-    return got if isinstance(got, str) else "".join(got)
+    return to_ipa(unit.rstrip("012"), "arpabet") or unit
 
 
 def _name(text: str, units: Sequence[str]) -> str:
