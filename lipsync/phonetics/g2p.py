@@ -332,6 +332,9 @@ def _clean(phonemes: List[str]) -> Tuple[str, ...]:
         p = tones.sub("", _DROP.sub("", p))
         if not p:
             continue
+        if out and all(unicodedata.category(c) in ("Lm", "Mn", "Sk") for c in p):
+            out[-1] += p  # a modifier espeak-ng writes as a phoneme of its own (Polish "p_ʲ")
+            continue
         p = _ESPEAK_MANDARIN.get(p, p)
         ipa = to_ipa(p, "espeak") or p
         out.extend([ipa] if parse(ipa) is not None else (split(ipa) or [ipa]))
@@ -380,6 +383,21 @@ def _han_run(run: str) -> List[Word]:
 def _one(token: str) -> Word:
     phones, read = _read(_raw_phonemes(token))
     return Word(token, phones, read)
+
+
+def _in_context(tokens: List[str]) -> List[Word]:
+    """Each token's phones as espeak-ng reads it in its sentence (a one-letter word alone is
+    read as the letter's name: Greek "Ο" as "omicron"; French liaison joins words), when
+    the sentence gives as many espeak words as the tokens alone do; else each alone."""
+    alone = [_raw_phonemes(t) for t in tokens]
+    whole = _raw_phonemes(" ".join(tokens))
+    if len(whole) != sum(len(a) for a in alone) or not all(alone):
+        return [Word(t, *_read(a)) for t, a in zip(tokens, alone)]
+    out, k = [], 0
+    for t, a in zip(tokens, alone):
+        out.append(Word(t, *_read(whole[k:k + len(a)])))
+        k += len(a)
+    return out
 
 
 def _japanese_tokens(text: str) -> List[Tuple[str, str]]:
@@ -446,7 +464,10 @@ def transcribe(text: str, lang: str) -> List[Word]:
                     phones, read = _read(_raw_phonemes(reading))
                     out.append(Word(surface, phones, read))
             return out
-        for token in _tokens(text):
+        tokens = _tokens(text)
+        if not (voice in _TONE_VOICES and any(_HAN.search(t) for t in tokens)):
+            return _in_context(tokens)
+        for token in tokens:
             if _HAN.search(token) and voice in _TONE_VOICES:
                 # Han runs (possibly with kana or letters around): characters one by one
                 pos = 0
@@ -518,6 +539,10 @@ def synthesise(text: str, lang: str) -> Tuple[np.ndarray, List[Tuple[float, floa
     for k, (sample, name) in enumerate(names):
         nxt = names[k + 1][0] / SYNTH_RATE if k + 1 < len(names) else end
         label = name[0] if name else ""
+        if label and phonemes and all(unicodedata.category(c) in ("Lm", "Mn", "Sk") for c in label):
+            a, _, prev = phonemes[-1]  # a modifier reported as a phoneme of its own (Polish "ʲ")
+            phonemes[-1] = (a, min(nxt, end), prev + label)
+            continue
         if label and nxt > sample / SYNTH_RATE:
             start = sample / SYNTH_RATE
             if label[0] in _UNVOICED_STOPS:

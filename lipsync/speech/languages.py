@@ -245,7 +245,11 @@ def align_language(pcm, text: Optional[str], lang: str, *, quiet: bool = True, p
     def shown(n: str) -> str:
         return plans[n][0] if n in plans else n
 
-    al = A._align_pcm(pcm, tuple(names), quiet=quiet, path=path, jobs=jobs, recogniser="loop", shown=shown)
+    token = A._WIDE.set(True)
+    try:
+        al = A._align_pcm(pcm, tuple(names), quiet=quiet, path=path, jobs=jobs, recogniser="loop", shown=shown)
+    finally:
+        A._WIDE.reset(token)
     return _in_ipa(al, plans, unread)
 
 
