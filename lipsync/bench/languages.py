@@ -9,7 +9,8 @@ bilabials, spoken by espeak-ng, which reports each phoneme as it speaks it
   whether every bilabial stop or nasal maps to the closed mouth;
 * with the transcript (``--lang``): the share of 25 fps frames whose mouth shape
   (english-to-rhubarb, the default map) is the truth's, each frame sampled at its centre
-  over the whole clip, and the share of the truth's bilabial stops and nasals shown
+  over the whole clip (also without the one-frame shift other languages' boundaries get,
+  :data:`~lipsync.speech.align.BOUNDARY_OFFSET_OTHER_S`), and the share of the truth's bilabial stops and nasals shown
   closed (a frame centred within the phone, widened by half a frame each side, shows the
   closed mouth: lips that meet between two frames are not seen); alignment speed as a
   multiple of real time on one core (``jobs=1``, CPU time of this process);
@@ -36,6 +37,7 @@ from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
+from ..speech.align import BOUNDARY_OFFSET_OTHER_S
 from . import FIGURES, Context
 
 #: Output frame rate the mouth shapes are compared at (the renderer's default).
@@ -176,12 +178,20 @@ def _synthetic(ctx: Context, rows: List[dict]) -> None:
             al, cpu, said = _aligned(pcm, transcript, lang)
             ours = frames(al.phones, pmap, duration)
             row[f"{case}_frames_agree"] = _r(float(np.mean(ours == truth_frames)))
+            if transcript is not None:  # without the one-frame shift other languages get
+                back = frames(_shifted(al.phones, -BOUNDARY_OFFSET_OTHER_S, duration), pmap, duration)
+                row["text_frames_agree_unshifted"] = _r(float(np.mean(back == truth_frames)))
             row[f"{case}_bilabials_closed"] = _r(bilabials_closed(truth, ours, closed))
             row[f"{case}_x_real_time_cpu"] = round(duration / max(cpu, 1e-9), 1)
             if transcript is not None:
                 row["confidence"] = _r(al.confidence)
                 row["warnings"] = len(said)
         rows.append(row)
+
+
+def _shifted(tl, dt: float, duration: float):
+    return _timeline([(max(s.start + dt, 0.0), min(s.end + dt, duration), s.label) for s in tl
+                      if s.end + dt > 0 and s.start + dt < duration], duration)
 
 
 def _align(pcm, text, lang):
@@ -247,6 +257,9 @@ def _real(ctx: Context, rows: List[dict]) -> None:
             ours = [(s.start, s.end, s.label) for s in al.words]
             if [w for *_, w in ref] == [w for *_, w in ours]:
                 err = np.abs(np.array([[a[0] - b[0], a[1] - b[1]] for a, b in zip(ours, ref)]).ravel())
+                back = np.abs(np.array([[a[0] - BOUNDARY_OFFSET_OTHER_S - b[0], a[1] - BOUNDARY_OFFSET_OTHER_S - b[1]]
+                                        for a, b in zip(ours, ref)]).ravel())
+                row["words_vs_textgrid_mean_ms_unshifted"] = round(1000 * float(back.mean()), 1)
                 row.update({"words_vs_textgrid_mean_ms": round(1000 * float(err.mean()), 1),
                             "words_vs_textgrid_median_ms": round(1000 * float(np.median(err)), 1),
                             "words_vs_textgrid_within_50ms": _r(float(np.mean(err <= 0.05)))})
