@@ -51,6 +51,7 @@ from . import phonetics
 from ._data import data_dir
 from .errors import MapError, TimelineError, UnknownNameError
 from .phonetics import visemes as _rules
+from .phonetics.segments import parse_sequence as _parse_sequence
 from .registry import Registry
 from .timeline import VISEME, Segment, Timeline
 
@@ -160,7 +161,8 @@ class PhonemeMap(BaseModel):
     def _rules_valid(cls, v):
         if isinstance(v, str):
             if v != "none" and v not in _rules.RULESETS:
-                raise ValueError(f"unknown rule set {v!r}; one of {', '.join(_rules.RULESETS)}, none, or a list of rows")
+                raise ValueError(f"unknown rule set {v!r}; one of {', '.join(_rules.RULESETS)}, none, "
+                                 f"or a list of rows")
         elif v is not None:
             _rules.compile_rules(v)
         return v
@@ -243,6 +245,12 @@ class PhonemeMap(BaseModel):
         >>> m.targets("y"), m.targets("y", notation="ipa"), m.targets("ʁ"), m.targets("j", notation="pinyin")
         (['B'], ['F'], ['B'], ['B'])
         """
+        if notation in _CONVERTED and not self.is_silence(label):
+            ipa = phonetics.to_ipa(label, notation)
+            parts = _parse_sequence(ipa) if ipa else None
+            if parts and self._compiled_rules:  # X-SAMPA's R is ʁ even where the map has ARPAbet's R
+                return _rules.parts_visemes(parts, self._compiled_rules)
+            notation = None  # not of that notation, or no rules to read it by: the label alone
         if label in self.map:
             return _as_list(self.map[label])
         if self.is_silence(label):
@@ -253,15 +261,7 @@ class PhonemeMap(BaseModel):
             if english is not None or notation in ("english", "arpabet", "timit"):
                 return english
             return self._feature_targets(label)
-        if notation == "ipa":
-            return self._feature_targets(label)
-        ipa = phonetics.to_ipa(label, notation)
-        if ipa == "":
-            return [self.silence]
-        if ipa is None:  # not of that notation (a stray ARPAbet label in a pinyin tier): read alone
-            return self.targets(label)
-        parts = phonetics.segments.parse_sequence(ipa)
-        return _rules.parts_visemes(parts, self._compiled_rules) if parts else None
+        return self._feature_targets(label)
 
     def _english_targets(self, label: str) -> Optional[List[str]]:
         ps = self._phoneset
@@ -284,13 +284,15 @@ class PhonemeMap(BaseModel):
         """A copy with every viseme renamed through ``names`` (missing keys unchanged)."""
         r = lambda v: names.get(v, v)  # noqa: E731
         rules = _rules.renamed_rules(self._compiled_rules, names) if self._compiled_rules else "none"
-        return self.model_copy(update=dict(
+        copy = self.model_copy(update=dict(
             rules=rules,
             silence=r(self.silence), fallback=r(self.fallback),
             map={k: (r(t) if isinstance(t, str) else [r(x) for x in t]) for k, t in self.map.items()},
             closures=[r(c) for c in self.closures],
             breath=None if self.breath is None else r(self.breath),
             aliases={r(k): v for k, v in self.aliases.items()}))
+        copy.__dict__.pop("_compiled_rules", None)  # model_copy copies cached properties too
+        return copy
 
 
 # Used only by maps that name no phone set.
@@ -300,6 +302,8 @@ _BUILTIN_SILENCE = phonetics.SILENCE
 # timeline whose notation is IPA (y: rounded vowel, not the glide; r: trill, not English r;
 # q: uvular stop, not TIMIT's glottal stop).
 _IPA_NOT_ENGLISH = frozenset({"y", "r", "q"})
+# Notations whose labels are converted into IPA before anything else is asked.
+_CONVERTED = frozenset({"xsampa", "pinyin", "espeak"})
 
 
 def _as_list(target: Union[str, List[str]]) -> List[str]:

@@ -24,12 +24,27 @@ Examples
 
 from __future__ import annotations
 
-from .english import closest_english, english_phones
-from .features import FEATURES, Features, features
-from .notations import NOTATIONS, SILENCE, detect, to_ipa
-from .segments import Part, Phone, canonical, parse, split
-from .visemes import RULESETS, compile_rules, compiled, ipa_visemes, label_visemes
+import importlib
+from typing import Any
 
-__all__ = ["FEATURES", "Features", "features", "Part", "Phone", "parse", "split", "canonical", "NOTATIONS",
-           "SILENCE", "detect", "to_ipa", "RULESETS", "compile_rules", "compiled", "label_visemes",
-           "ipa_visemes", "closest_english", "english_phones"]
+# Public names and the module of each, imported on first use: the timeline readers import
+# one module of this room, and `import lipsync` stays cheap.
+_EXPORTS = {
+    "FEATURES": "features", "Features": "features", "features": "features",
+    "Part": "segments", "Phone": "segments", "parse": "segments", "split": "segments", "canonical": "segments",
+    "NOTATIONS": "notations", "SILENCE": "notations", "detect": "notations", "to_ipa": "notations",
+    "RULESETS": "visemes", "compile_rules": "visemes", "compiled": "visemes", "ipa_visemes": "visemes",
+    "label_visemes": "visemes",
+    "closest_english": "english", "english_phones": "english",
+}
+__all__ = sorted(_EXPORTS)
+
+
+def __getattr__(name: str) -> Any:
+    if name in _EXPORTS:
+        return getattr(importlib.import_module(f".{_EXPORTS[name]}", __name__), name)
+    raise AttributeError(f"module 'lipsync.phonetics' has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted(list(globals()) + list(_EXPORTS))

@@ -35,7 +35,8 @@ ARPABET: Dict[str, str] = {
     "M": "m", "N": "n", "NG": "ŋ", "P": "p", "R": "ɹ", "S": "s", "SH": "ʃ", "T": "t", "TH": "θ", "V": "v",
     "W": "w", "Y": "j", "Z": "z", "ZH": "ʒ",
 }
-ARPABET_VOWELS = frozenset(k for k, v in ARPABET.items() if parse(v) and parse(v).parts[0].is_vowel)
+# The phones that carry CMUdict's stress digits (AH0, OW1).
+ARPABET_VOWELS = frozenset({"AA", "AE", "AH", "AO", "AW", "AY", "EH", "ER", "EY", "IH", "IY", "OW", "OY", "UH", "UW"})
 
 # TIMIT's labels beyond ARPAbet's (TIMIT phonetic transcription conventions, phoncode.doc).
 # Closures are the stop's own articulation held (bcl: the lips already closed for b).
@@ -90,30 +91,59 @@ PINYIN_FINALS: Dict[str, str] = {
     "ü": "y", "v": "y", "üe": "ɥɛ", "ve": "ɥɛ", "ue": "ɥɛ", "üan": "ɥɛn", "van": "ɥɛn", "ün": "yn", "vn": "yn",
     "ii": "ɿ", "iii": "ʅ",  # AISHELL-3 / MFA: the apical vowels of zi ci si and zhi chi shi ri
     "ir": "ʅ", "iz": "ɿ",
+    # MFA's pinyin dictionary splits a final's nasal coda off (ian = ia + n, üan = va + n):
+    "io": "jo", "va": "ɥɛ", "ng": "ŋ",
 }
 _PINYIN_FINAL_TONE = re.compile(r"^([a-zêüv]+?)([1-5])$")
 
-# --- espeak-ng: its IPA output's own spellings ---------------------------------------------
-# `espeak-ng -q --ipa` writes IPA with stress marks, "-" between joined words, "(en)"
-# language-switch marks and, for tone languages, tone digits; a few letters are not IPA's.
-ESPEAK_IPA: Dict[str, str] = {
-    "ε": "ɛ",   # Danish: Greek epsilon U+03B5 for ɛ
+# --- espeak-ng: its IPA output and its mnemonics -------------------------------------------
+# `espeak-ng -q --ipa` writes IPA, but a phoneme whose table gives no IPA is printed as its
+# ASCII mnemonic pushed through a character table, so its output also carries espeak's own
+# marks: Mandarin's "ts.h" (retroflex, aspirated), "i." (apical vowel), "n^" (palatal),
+# "t`" (retroflex), "d[" (dental), "l#" (a variant), tone digits, "(en)" language switches.
+# Rows apply in order: (pattern, replacement, the mark's meaning in espeak-ng's phoneme files).
+ESPEAK_MARKS = (
+    (r"\([a-z-]+\)", "", "a language switch: (en) ... (cmn)"),
+    (r"[ˈˌ',%=]", "", "stress"),
+    (r"ts\.", "ʈʂ", "retroflex affricate (cmn zh)"),
+    (r"dz\.", "ɖʐ", "voiced retroflex affricate"),
+    (r"s\.", "ʂ", "retroflex fricative (cmn sh)"),
+    (r"z\.", "ʐ", "voiced retroflex fricative (cmn r)"),
+    (r"i\.", "ʅ", "the apical vowel after zh ch sh r (cmn shi)"),
+    (r"r\.", "ɻ", "retroflex approximant"),
+    (r"n\.", "ɳ", "retroflex nasal"),
+    (r"l\.", "ɭ", "retroflex lateral"),
+    (r"t\.", "ʈ", "retroflex stop"),
+    (r"d\.", "ɖ", "voiced retroflex stop"),
+    (r"^h([ptkcsʃɕʂθfx])", r"\1", "a leading h on a voiceless consonant: preaspiration (my hs, ht)"),
+    (r"([ptkcqbdɡgʈɖɟ]|ts|dz|tɕ|tʃ|ʈʂ|tɬ)h", r"\1ʰ", "h after a stop: aspiration (cmn ph th kh tsh tɕh)"),
+    (r"_h", "ʰ", "aspiration"),
+    (r"n\^", "ɲ", "palatal nasal"),
+    (r"l\^", "ʎ", "palatal lateral"),
+    (r"\^", "ʲ", "palatalised"),
+    (r"t`", "ʈ", "retroflex"), (r"d`", "ɖ", "retroflex"), (r"n`", "ɳ", "retroflex"), (r"s`", "ʂ", "retroflex"),
+    (r"z`", "ʐ", "retroflex"), (r"l`", "ɭ", "retroflex"), (r"r`", "ɽ", "retroflex"),
+    (r"([aeiouyæɑɒɔəɛɜɪʊʌø])`", "\\1\u02de", "r-coloured vowel"),
+    (r"`", "", "retroflex on a letter without a retroflex form (p` k` q`): the letter itself"),
+    (r"\[", "\u032a", "dental"),
+    (r'"', "\u0308", "centralised (ru, mi u\")"),
+    (r"\?", "ʔ", "glottal stop"),
+    (r"ε", "ɛ", "Greek epsilon (da)"),
+    (r"Φ", "ɸ", "Greek capital phi: espeak's character for the bilabial fricative (smj, om)"),
+    (r"[-#+_.|!]", "", "variants, syllable and word boundaries"),
+)
+# ASCII letters left after the marks, in a word with IPA letters: espeak's character table
+# for mnemonics (dictionary.c, ipa1[]): A is ɑ, N ŋ, S ʃ, ... ; digits there are tones.
+ESPEAK_ASCII: Dict[str, str] = {
+    "A": "ɑ", "B": "β", "C": "ç", "D": "ð", "E": "ɛ", "G": "ɢ", "H": "ħ", "I": "ɪ", "J": "ɟ", "K": "ɬ",
+    "L": "ɫ", "M": "ɱ", "N": "ŋ", "O": "ɔ", "P": "ɸ", "Q": "ɣ", "R": "ʀ", "S": "ʃ", "T": "θ", "U": "ʊ",
+    "V": "ʌ", "W": "œ", "X": "χ", "Y": "ø", "Z": "ʒ", "&": "æ", "@": "ə", "*": "ɾ", "g": "ɡ", "~": "\u0303",
+    ":": "ː", ";": "ʲ",
 }
-# espeak-ng's ASCII phoneme mnemonics (`espeak-ng -x`, Kirshenbaum-like), longest first:
-ESPEAK_MNEMONICS: Dict[str, str] = {
-    "aI@": "aɪə", "aU@": "aʊə", "aI": "aɪ", "aU": "aʊ", "eI": "eɪ", "oU": "oʊ", "OI": "ɔɪ", "@U": "əʊ",
-    "e@": "eə", "i@": "ɪə", "U@": "ʊə", "3:": "ɜː", "tS": "tʃ", "dZ": "dʒ", "ts": "ts", "dz": "dz",
-    "n^": "ɲ", "l^": "ʎ", "r-": "ɹ", "a#": "ɐ", "@-": "ə", "I#": "ᵻ", "I2": "ɪ", "i:": "iː", "u:": "uː",
-    "A:": "ɑː", "O:": "ɔː", "a:": "aː", "e:": "eː", "o:": "oː", "y:": "yː", "W~": "œ̃", "A~": "ɑ̃",
-    "O~": "ɔ̃", "E~": "ɛ̃", "e~": "ɛ̃", "o~": "ɔ̃", "a~": "ɑ̃",
-    "A": "ɑ", "E": "ɛ", "I": "ɪ", "O": "ɔ", "U": "ʊ", "V": "ʌ", "0": "ɒ", "3": "ɜ", "@": "ə", "W": "œ", "Y": "ø",
-    "S": "ʃ", "Z": "ʒ", "T": "θ", "D": "ð", "N": "ŋ", "C": "ç", "Q": "ʔ", "R": "ʁ", "X": "χ", "?": "ʔ",
-    "a": "a", "b": "b", "d": "d", "e": "e", "f": "f", "g": "ɡ", "h": "h", "i": "i", "j": "j", "k": "k",
-    "l": "l", "m": "m", "n": "n", "o": "o", "p": "p", "r": "r", "s": "s", "t": "t", "u": "u", "v": "v",
-    "w": "w", "x": "x", "y": "y", "z": "z", ":": "ː", "~": "\u0303",
-}
-_ESPEAK_KEYS = sorted(ESPEAK_MNEMONICS, key=len, reverse=True)
-_ESPEAK_SKIP = set("'\",%=_|-#!") | set("0123456789")
+# The same table's digits, which only an all-ASCII word (espeak-ng -x) uses as letters.
+_ESPEAK_DIGITS = {"0": "ɒ", "3": "ɜ", "8": "ɵ"}
+_SUPERSCRIPT_BASE = {"ⁿ": "n", "ᵐ": "m", "ᵑ": "ŋ", "ʰ": "h", "ʲ": "j", "ʷ": "w", "ᶮ": "ɲ"}
+_ESPEAK_RES = tuple((re.compile(p), r) for p, r, _ in ESPEAK_MARKS)
 
 
 def _longest_match(text: str, table: Dict[str, str], keys) -> Optional[str]:
@@ -182,22 +212,39 @@ def pinyin_to_ipa(label: str) -> Optional[str]:
 
 
 def espeak_to_ipa(label: str) -> Optional[str]:
-    """espeak-ng output -> IPA: its ``--ipa`` spellings or its ASCII mnemonics (``-x``).
+    """espeak-ng output -> IPA: its ``--ipa`` words (with espeak's own marks) or ``-x`` mnemonics.
 
-    Stress and boundary marks and language-switch marks such as ``(en)`` are dropped.
+    Stress, boundaries, tone digits and language switches such as ``(en)`` are dropped; a
+    letter written twice (espeak-ng's long vowels ``aa``) is one long letter.
 
     Examples
     --------
     >>> espeak_to_ipa("bO~Z'ur"), espeak_to_ipa("hˌaʊ"), espeak_to_ipa("hˈεlʔo")
     ('bɔ̃ʒur', 'haʊ', 'hɛlʔo')
+    >>> espeak_to_ipa("ts.h"), espeak_to_ipa("s.ˈi.5"), espeak_to_ipa("n^"), espeak_to_ipa("aa"), espeak_to_ipa("ᵐ")
+    ('ʈʂʰ', 'ʂʅ', 'ɲ', 'aː', 'm')
     """
-    text = re.sub(r"\([a-z-]+\)", "", unicodedata.normalize("NFC", label.strip()))
-    if any(ord(c) > 127 for c in text):  # IPA output
-        for a, b in ESPEAK_IPA.items():
-            text = text.replace(a, b)
-        return "".join(c for c in text if c not in "ˈˌ-_|0123456789") or None
-    text = "".join(c for c in text if c not in _ESPEAK_SKIP)
-    return _longest_match(text, ESPEAK_MNEMONICS, _ESPEAK_KEYS) if text else None
+    text = unicodedata.normalize("NFC", label.strip())
+    if text in _SUPERSCRIPT_BASE:
+        return _SUPERSCRIPT_BASE[text]
+    mnemonic = text.isascii()
+    for pattern, repl in _ESPEAK_RES:
+        text = pattern.sub(repl, text)
+    out = []
+    for ch in text:
+        if ch.isdigit():
+            if mnemonic and ch in _ESPEAK_DIGITS:
+                out.append(_ESPEAK_DIGITS[ch])
+            continue  # a tone (IPA output) or a variant number (iz2)
+        out.append(ESPEAK_ASCII.get(ch, ch))
+    text = "".join(out).lstrip("ʰˀ")  # preaspiration, preglottalisation: the letter after is the sound
+    if text and text[0] in _SUPERSCRIPT_BASE:  # prenasalised: ⁿd is n + d
+        text = _SUPERSCRIPT_BASE[text[0]] + text[1:]
+    half = len(text) // 2
+    if half and len(text) % 2 == 0 and text[:half] == text[half:]:
+        text = text[:half] + "ː" if half == 1 else text[:half]  # aa -> aː; əiəi -> əi
+    text = re.sub(r"(\w)\1", "\\1ː", text)
+    return text if text and parse_sequence(text) is not None else None
 
 
 def arpabet_to_ipa(label: str) -> Optional[str]:
@@ -299,7 +346,7 @@ def detect(labels: Iterable[str]) -> str:
     tone_finals = set()
     ipa = False
     upper_arpabet = False
-    for label in labels:
+    for label in set(labels):  # a timeline repeats a few dozen labels thousands of times
         text = label.strip()
         low = text.lower()
         if low in SILENCE:

@@ -10,7 +10,8 @@ kept apart because they do not shape the mouth. :func:`split` cuts a whole trans
 What counts as one phone: one base letter; two or three vowels (a diphthong or
 triphthong, ``aɪ``, ``aɪə``); a vowel and a glide (MFA's ``aj``, ``ow``); a stop or nasal
 followed by a fricative, trill or approximant of another letter (affricates and prenasalised
-stops: ``ts``, ``pf``, ``tʃ``, ``mb``), two different stops (``kp``, labial-velar); or any
+stops: ``ts``, ``pf``, ``tʃ``, ``mb``), two different stops or nasals (``kp``, ``ŋm``:
+labial-velar); or any
 two letters joined by a tie (``t͡s``, ``k͡p``). Anything else (``zz``, ``qq``, ``xyz``) is not
 a phone, so a label such as ``"zz"`` still warns as unknown rather than passing for IPA.
 
@@ -133,7 +134,8 @@ class Phone:
     @property
     def kind(self) -> str:
         """``vowel``, ``consonant``, ``diphthong`` (vowel + vowel or glide),
-        ``affricate`` (two consonants) or ``sequence``."""
+        ``affricate`` (two consonants: also prenasalised and doubly articulated stops) or
+        ``sequence``."""
         if len(self.parts) == 1:
             return self.parts[0].features.kind
         vowels = [p.is_vowel for p in self.parts]
@@ -144,7 +146,13 @@ class Phone:
         return "sequence"
 
     def ipa(self) -> str:
-        """The segments without tone and stress, in IPA (``"ˈa˥ː"`` -> ``"aː"``)."""
+        """The segments without tone and stress, in IPA.
+
+        Examples
+        --------
+        >>> parse("ˈa˥ː").ipa(), parse("t͡sʰ").ipa()
+        ('aː', 'tsʰ')
+        """
         return "".join(p.ipa() for p in self.parts)
 
 
@@ -232,10 +240,8 @@ def _one_phone(parts: List[Tuple[str, set, bool]]) -> bool:
             return True  # affricate or prenasalised stop: ts pf tʃ tɕ ʈʂ kx mb nd
         if first.manner == "stop" and second.manner == "stop":
             return True  # doubly articulated stop: kp ɡb
-        if first.manner == "nasal" and second.manner == "stop":
-            return True  # prenasalised stop: mb nd ŋɡ
-    if len(parts) == 2 and feats[0].kind == CONSONANT and bases[1] in _GLIDES:
-        return False
+        if first.manner == "nasal" and second.manner in ("stop", "nasal"):
+            return True  # prenasalised stop (mb nd ŋɡ), doubly articulated nasal (Vietnamese ŋm)
     return False
 
 

@@ -27,7 +27,6 @@ True
 from __future__ import annotations
 
 import functools
-from dataclasses import dataclass
 from typing import Any, Dict, Iterable, List, Mapping, Optional, Sequence, Tuple, Union
 
 from .features import BACKNESS, HEIGHTS, MANNERS, PLACES, Features
@@ -95,8 +94,8 @@ OCULUS_RULES: List[Dict[str, Any]] = [
     dict(kind="consonant", place=["glottal", "pharyngeal", "epiglottal"], viseme="E",
          why="no oral gesture: a neutral half-open mouth (HH and Q are E)"),
     dict(kind="consonant", place=["postalveolar", "retroflex", "alveolo-palatal", "palatal-velar"],
-         manner=["fricative", "stop", "approximant"], viseme="CH",
-         why="tongue blade behind the ridge, lips slightly forward (SH ZH CH JH; ɕ ʂ ʐ ɧ)"),
+         manner="fricative", viseme="CH",
+         why="tongue blade behind the ridge, lips slightly forward (SH ZH, the release of CH JH; ɕ ʂ ʐ ɧ)"),
     dict(kind="consonant", place="alveolar", manner="fricative", viseme="SS", why="s z"),
     dict(kind="consonant", place="palatal", manner="approximant", viseme="I", why="j: the i-shape (Y is I)"),
     dict(kind="consonant", place="palatal", manner="fricative", viseme="CH", why="ç ʝ: blade and body at the palate"),
