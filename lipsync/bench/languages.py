@@ -10,9 +10,10 @@ bilabials, spoken by espeak-ng, which reports each phoneme as it speaks it
 * with the transcript (``--lang``): the share of 25 fps frames whose mouth shape
   (english-to-rhubarb, the default map) is the truth's, each frame sampled at its centre
   over the whole clip (also without the one-frame shift other languages' boundaries get,
-  :data:`~lipsync.speech.align.BOUNDARY_OFFSET_OTHER_S`), and the share of the truth's bilabial stops and nasals shown
-  closed (a frame centred within the phone, widened by half a frame each side, shows the
-  closed mouth: lips that meet between two frames are not seen); alignment speed as a
+  :data:`~lipsync.speech.align.BOUNDARY_OFFSET_OTHER_S`), and the share of the truth's
+  bilabial stops and nasals shown closed: a frame of the video as the renderer's sequencer
+  plans it (which keeps every closure on at least one frame), within the phone widened by
+  half a frame each side, shows the closed mouth fully; alignment speed as a
   multiple of real time on one core (``jobs=1``, CPU time of this process);
 * without the transcript (the free phone loop): the same two shares.
 
@@ -102,6 +103,21 @@ def frames(tl, pmap, duration: float) -> np.ndarray:
     return out
 
 
+def shown(tl, pmap, duration: float) -> np.ndarray:
+    """The viseme each 25 fps frame of the video shows fully (None while morphing), as the
+    renderer's sequencer plans it: it keeps every closure on at least one frame, however
+    short (``closures`` of the map)."""
+    from ..phonemes import map_timeline
+    from ..sequencer import sequence
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        mapped = map_timeline(tl, pmap, notation="ipa") if len(tl) else tl
+    specs = sequence(mapped.replace(stated_end=duration) if len(tl) else mapped, fps=FPS, rest=pmap.silence,
+                     closures=pmap.closures, duration=duration)
+    return np.array([f.shown for f in specs], dtype=object)
+
+
 def is_bilabial(label: str) -> bool:
     """A bilabial stop or nasal (the lips close), by the phonetics room's features."""
     from ..phonetics import parse
@@ -114,8 +130,9 @@ def is_bilabial(label: str) -> bool:
 
 
 def bilabials_closed(truth, shown: np.ndarray, closed: Sequence[str]) -> Optional[float]:
-    """Share of the truth's bilabial stops and nasals during which a frame shows a closed mouth."""
-    centres = (np.arange(len(shown)) + 0.5) / FPS
+    """Share of the truth's bilabial stops and nasals during which a frame of the video
+    (:func:`shown`: frame n shows time n / fps) shows the closed mouth fully."""
+    centres = np.arange(len(shown)) / FPS
     hits = []
     for s in truth:
         if is_bilabial(s.label):
@@ -172,7 +189,7 @@ def _synthetic(ctx: Context, rows: List[dict]) -> None:
         row = {"figure": "languages", "language": lang, "script": script, "seconds": round(duration, 1),
                "phones": len(truth), "fallbacks": len(fallbacks) and ",".join(fallbacks),
                "bilabials_map_closed": f"{sum(bil_map)}/{len(bil_map)}",
-               "truth_bilabials_seen": _r(bilabials_closed(truth, truth_frames, closed))}
+               "truth_bilabials_seen": _r(bilabials_closed(truth, shown(truth, pmap, duration), closed))}
         _align(pcm[:8000], text, lang)  # loads the decoder and the language's voice first
         for case, transcript in (("text", text), ("no_text", None)):
             al, cpu, said = _aligned(pcm, transcript, lang)
@@ -181,7 +198,7 @@ def _synthetic(ctx: Context, rows: List[dict]) -> None:
             if transcript is not None:  # without the one-frame shift other languages get
                 back = frames(_shifted(al.phones, -BOUNDARY_OFFSET_OTHER_S, duration), pmap, duration)
                 row["text_frames_agree_unshifted"] = _r(float(np.mean(back == truth_frames)))
-            row[f"{case}_bilabials_closed"] = _r(bilabials_closed(truth, ours, closed))
+            row[f"{case}_bilabials_closed"] = _r(bilabials_closed(truth, shown(al.phones, pmap, duration), closed))
             row[f"{case}_x_real_time_cpu"] = round(duration / max(cpu, 1e-9), 1)
             if transcript is not None:
                 row["confidence"] = _r(al.confidence)

@@ -312,11 +312,6 @@ _TRAILING_TONE = re.compile(r"(?<=.)[0-9ɜ]+$")
 _DIGITS = re.compile(r"[0-9]")
 
 
-#: espeak-ng's Mandarin voice writes retroflexes with a full stop after the letter, which is
-#: no IPA (the phonetics room's espeak normaliser is asked for these too).
-_ESPEAK_MANDARIN = {"ts.h": "ʈʂʰ", "ts.": "ʈʂ", "s.": "ʂ", "z.": "ʐ", "i.": "ɨ"}
-
-
 def _clean(phonemes: List[str]) -> Tuple[str, ...]:
     """IPA segments of espeak-ng phonemes: stress, tone and link marks dropped, espeak's own
     spellings made IPA (:func:`lipsync.phonetics.to_ipa`), and a phoneme that is more than
@@ -335,7 +330,6 @@ def _clean(phonemes: List[str]) -> Tuple[str, ...]:
         if out and all(unicodedata.category(c) in ("Lm", "Mn", "Sk") for c in p):
             out[-1] += p  # a modifier espeak-ng writes as a phoneme of its own (Polish "p_ʲ")
             continue
-        p = _ESPEAK_MANDARIN.get(p, p)
         ipa = to_ipa(p, "espeak") or p
         out.extend([ipa] if parse(ipa) is not None else (split(ipa) or [ipa]))
     return tuple(out)

@@ -154,29 +154,13 @@ def check_transcript(text: str, lang: Optional[str] = None, *, path: Optional[st
 
 # --- IPA segments to en-us acoustic units and back -------------------------------------------
 
-#: Where the en-us unit nearest by features is not the nearest by sound: open [a] (and its
-#: central and raised neighbours ä, ɐ), which most languages' transcriptions write for their
-#: open vowel, is a front vowel by the IPA chart, so the features give AE; but US English
-#: raises its AE towards [ɛə], and the open vowel of Italian, Spanish, Greek or Japanese
-#: sounds like AA. Measured on ``make bench``'s 20 espeak-ng sentences: with AE the
-#: Italian and Greek sentences found no path at all and the mean frame agreement was
-#: 0.666 (lowest 0.188); with AA every sentence aligned, mean 0.735 (lowest 0.548).
-_ACOUSTIC_UNITS = {("a", "AE"): "AA", ("ä", "AE"): "AA", ("ɐ", "AE"): "AA"}
-
-
 def _units(phone: str) -> Tuple[str, ...]:
-    """The en-us ARPAbet acoustic units standing for one IPA segment (closest by features,
-    with :data:`_ACOUSTIC_UNITS` where sound says otherwise; an affricate or diphthong
-    English lacks gets two or three)."""
-    from ..phonetics import english_phones, parse
+    """The en-us ARPAbet acoustic units standing for one IPA segment: the closest by
+    features (open a as AA, by sound: the phonetics room's overrides), an affricate or
+    diphthong English lacks as two or three."""
+    from ..phonetics import english_phones
 
-    ph = parse(phone)
-    units = tuple(english_phones(phone)) or ("AH",)
-    if ph is not None and len(ph.parts) == 1 and len(units) == 1:
-        return (_ACOUSTIC_UNITS.get((ph.parts[0].base, units[0]), units[0]),)
-    if ph is not None and len(ph.parts) == len(units):  # a diphthong: its parts one by one
-        return tuple(_ACOUSTIC_UNITS.get((part.base, u), u) for part, u in zip(ph.parts, units))
-    return units
+    return tuple(english_phones(phone)) or ("AH",)
 
 
 def _ipa_of_unit(unit: str) -> str:
