@@ -130,14 +130,20 @@ def is_bilabial(label: str) -> bool:
 
 
 def bilabials_closed(truth, shown: np.ndarray, closed: Sequence[str]) -> Optional[float]:
-    """Share of the truth's bilabial stops and nasals during which a frame of the video
-    (:func:`shown`: frame n shows time n / fps) shows the closed mouth fully."""
-    centres = np.arange(len(shown)) / FPS
-    hits = []
+    """Share of the truth's lip closures (runs of touching bilabial stops and nasals, as in
+    "um barco": one closure) during which a frame of the video (:func:`shown`: frame n
+    shows time n / fps), widened by :data:`BILABIAL_SLACK_S` each side, shows the closed
+    mouth fully."""
+    times = np.arange(len(shown)) / FPS
+    runs: List[List[float]] = []
     for s in truth:
         if is_bilabial(s.label):
-            near = (centres >= s.start - BILABIAL_SLACK_S) & (centres < s.end + BILABIAL_SLACK_S)
-            hits.append(bool(np.isin(shown[near], list(closed)).any()))
+            if runs and abs(runs[-1][1] - s.start) < 1e-6:
+                runs[-1][1] = s.end
+            else:
+                runs.append([s.start, s.end])
+    hits = [bool(np.isin(shown[(times >= a - BILABIAL_SLACK_S) & (times < b + BILABIAL_SLACK_S)], list(closed)).any())
+            for a, b in runs]
     return float(np.mean(hits)) if hits else None
 
 
