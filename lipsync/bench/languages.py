@@ -13,7 +13,7 @@ bilabials, spoken by espeak-ng, which reports each phoneme as it speaks it
   :data:`~lipsync.speech.align.BOUNDARY_OFFSET_OTHER_S`), and the share of the truth's
   bilabial stops and nasals shown closed: a frame of the video as the renderer's sequencer
   plans it (which keeps every closure on at least one frame), within the phone widened by
-  half a frame each side, shows the closed mouth fully; alignment speed as a
+  half a frame each side, shows the closed mouth (more than half way through a morph); alignment speed as a
   multiple of real time on one core (``jobs=1``, CPU time of this process);
 * without the transcript (the free phone loop): the same two shares.
 
@@ -104,9 +104,9 @@ def frames(tl, pmap, duration: float) -> np.ndarray:
 
 
 def shown(tl, pmap, duration: float) -> np.ndarray:
-    """The viseme each 25 fps frame of the video shows fully (None while morphing), as the
-    renderer's sequencer plans it: it keeps every closure on at least one frame, however
-    short (``closures`` of the map)."""
+    """The viseme each 25 fps frame of the video shows most (of the two it morphs between,
+    the one with the larger weight), as the renderer's sequencer plans it: it keeps every
+    closure on at least one frame, however short (``closures`` of the map)."""
     from ..phonemes import map_timeline
     from ..sequencer import sequence
 
@@ -115,7 +115,7 @@ def shown(tl, pmap, duration: float) -> np.ndarray:
         mapped = map_timeline(tl, pmap, notation="ipa") if len(tl) else tl
     specs = sequence(mapped.replace(stated_end=duration) if len(tl) else mapped, fps=FPS, rest=pmap.silence,
                      closures=pmap.closures, duration=duration)
-    return np.array([f.shown for f in specs], dtype=object)
+    return np.array([f.from_viseme if f.alpha < 0.5 else f.to_viseme for f in specs], dtype=object)
 
 
 def is_bilabial(label: str) -> bool:
@@ -133,7 +133,7 @@ def bilabials_closed(truth, shown: np.ndarray, closed: Sequence[str]) -> Optiona
     """Share of the truth's lip closures (runs of touching bilabial stops and nasals, as in
     "um barco": one closure) during which a frame of the video (:func:`shown`: frame n
     shows time n / fps), widened by :data:`BILABIAL_SLACK_S` each side, shows the closed
-    mouth fully."""
+    mouth (more than half way through a morph towards or away from it)."""
     times = np.arange(len(shown)) / FPS
     runs: List[List[float]] = []
     for s in truth:
