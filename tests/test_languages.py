@@ -149,3 +149,13 @@ def test_init_video_refuses_an_unreadable_transcript_before_any_work(tmp_path):
         from lipsync.speech.languages import check_transcript
 
         check_transcript("经广州", "ru")
+
+
+def test_the_modules_examples_run():
+    import doctest
+
+    import lipsync.bench.languages
+    import lipsync.speech.languages
+
+    for mod in (g2p, lipsync.speech.languages, lipsync.bench.languages):
+        assert doctest.testmod(mod, optionflags=doctest.ELLIPSIS).failed == 0, mod.__name__

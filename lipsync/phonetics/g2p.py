@@ -441,8 +441,8 @@ def transcribe(text: str, lang: str) -> List[Word]:
     >>> if espeak_available():
     ...     print([(w.text, "".join(w.phones)) for w in transcribe("Hola, 2 amigos", "es")])
     ... else:
-    ...     print([('Hola', 'ola'), ('2', 'dos'), ('amigos', 'amiɣos')])
-    [('Hola', 'ola'), ('2', 'dos'), ('amigos', 'amiɣos')]
+    ...     print([('Hola', 'ola'), ('2', 'ðos'), ('amigos', 'amiɣos')])
+    [('Hola', 'ola'), ('2', 'ðos'), ('amigos', 'amiɣos')]
     """
     code = resolve(lang)
     text = unicodedata.normalize("NFC", text)
