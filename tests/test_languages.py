@@ -159,3 +159,12 @@ def test_the_modules_examples_run():
 
     for mod in (g2p, lipsync.speech.languages, lipsync.bench.languages):
         assert doctest.testmod(mod, optionflags=doctest.ELLIPSIS).failed == 0, mod.__name__
+
+
+def test_serve_refuses_an_unknown_language_before_queueing(tmp_path):
+    from lipsync.server.jobs import Jobs
+
+    jobs = Jobs(tmp_path, bank=None, store=None, fps=25.0, map=None, timing=None, method="flow")
+    with pytest.raises(g2p.UnknownLanguageError, match="klingon"):
+        jobs.submit(b"RIFF", "speech.wav", lang="klingon")
+    assert list(tmp_path.iterdir()) == []  # nothing written, nothing queued
