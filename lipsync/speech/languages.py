@@ -101,8 +101,6 @@ def check_english_script(text: str, words: Sequence[str], *, path: Optional[str]
     ...
     lipsync.errors.InputError: the transcript is written in Cyrillic letters, which the English aligner cannot read: pass the language, for example --lang ru
     """
-    from .. import phonetics  # noqa: F401  (the room exists: the hint below names its --lang)
-
     unread = [t for t in text.split() if script_of(t)]
     if not unread:
         return
