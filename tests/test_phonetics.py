@@ -187,7 +187,9 @@ def test_xsampa_spot_checks():
 
 def test_pinyin_spot_checks():
     cases = {"zhong1": "ʈʂʊŋ", "xue2": "ɕɥɛ", "ri4": "ʐʅ", "si4": "sɿ", "lv4": "ly", "j": "tɕ", "q": "tɕʰ",
-             "x": "ɕ", "h": "x", "r": "ʐ", "c": "tsʰ", "iii4": "ʅ", "ii1": "ɿ", "uang3": "wɑŋ", "er2": "ɚ"}
+             "x": "ɕ", "h": "x", "r": "ʐ", "c": "tsʰ", "iii4": "ʅ", "ii1": "ɿ", "uang3": "wɑŋ", "er2": "ɚ",
+             "ye3": "jɛ", "yan2": "jɛn", "you3": "joʊ", "yi1": "i", "yu2": "y", "yuan2": "ɥɛn", "wo3": "wo",
+             "wei4": "weɪ", "ju4": "tɕy", "gui4": "kweɪ", "liu2": "ljoʊ", "nü3": "ny"}
     assert {k: phonetics.to_ipa(k, "pinyin") for k in cases} == cases
 
 

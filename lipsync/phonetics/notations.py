@@ -206,6 +206,8 @@ def pinyin_to_ipa(label: str) -> Optional[str]:
             if ini in ("y", "w"):  # yi, wu, yu: the glide letter only spells the vowel
                 if fin in ("i", "in", "ing", "ü", "üe", "üan", "ün", "u"):
                     return PINYIN_FINALS.get(fin if ini == "y" or fin != "u" else "u")
+                if ini == "y" and "i" + fin in PINYIN_FINALS:  # ye yan yang yao you yong: the i- finals
+                    return PINYIN_FINALS["i" + fin]
             if fin in PINYIN_FINALS:
                 return PINYIN_INITIALS[ini] + PINYIN_FINALS[fin]
     return None
