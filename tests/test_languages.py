@@ -168,3 +168,13 @@ def test_serve_refuses_an_unknown_language_before_queueing(tmp_path):
     with pytest.raises(g2p.UnknownLanguageError, match="klingon"):
         jobs.submit(b"RIFF", "speech.wav", lang="klingon")
     assert list(tmp_path.iterdir()) == []  # nothing written, nothing queued
+
+
+def test_without_the_lang_extra_another_language_says_how_to_install_it(tmp_path):
+    # the optional extra missing: simulated by blocking its import in a fresh interpreter
+    code = ("import sys; sys.modules['espeakng_loader'] = None\n"
+            "from lipsync.cli import main\n"
+            f"sys.exit(main(['align', {str(HELLO)!r}, '--lang', 'fr', '-o', {str(tmp_path / 'x.TextGrid')!r}]))")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert r.returncode == 2 and "pip install 'lipsync[lang]'" in r.stderr, r.stderr
+    assert "Traceback" not in r.stderr
