@@ -324,7 +324,7 @@ def _clean(phonemes: List[str]) -> Tuple[str, ...]:
     tones = _TRAILING_TONE if _CURRENT[0] in _TONE_VOICES else _DIGITS
     out: List[str] = []
     for p in phonemes:
-        p = tones.sub("", _DROP.sub("", p))
+        p = tones.sub("", _DROP.sub("", _SWITCH.sub("", p)))
         if not p:
             continue
         if out and all(unicodedata.category(c) in ("Lm", "Mn", "Sk") for c in p):
@@ -335,11 +335,25 @@ def _clean(phonemes: List[str]) -> Tuple[str, ...]:
     return tuple(out)
 
 
-def _read(words: List[List[str]]) -> Tuple[Tuple[str, ...], bool]:
-    """All phonemes of espeak's words (one transcript token), and whether read in the language."""
+def _read(words: List[List[str]], token: str = "") -> Tuple[Tuple[str, ...], bool]:
+    """All phonemes of espeak's words (one transcript token), and whether it is read.
+
+    espeak-ng switches to another language's rules, marking it "(en)", for a word its
+    voice has no rules for. A word in Latin letters (a name or loanword, "iPhone" in a
+    Chinese sentence) is then read as a speaker would say it; a character of another
+    script (a kanji the Japanese voice does not know is read as the English words "Chinese
+    letter") is not read at all.
+    """
     flat = [p for w in words for p in w]
-    read = bool(flat) and not any(_SWITCH.search(p) for p in flat)
+    switched = any(_SWITCH.search(p) for p in flat)
+    read = bool(flat) and (not switched or _latin(token))
     return (_clean(flat) if read else ()), read
+
+
+def _latin(token: str) -> bool:
+    """True if every letter of ``token`` is a Latin letter (and it has one)."""
+    letters = [c for c in token if unicodedata.category(c).startswith("L")]
+    return bool(letters) and all(unicodedata.name(c, "").startswith("LATIN") for c in letters)
 
 
 def _syllables(phonemes: Tuple[str, ...]) -> List[Tuple[str, ...]]:
@@ -375,7 +389,7 @@ def _han_run(run: str) -> List[Word]:
 
 
 def _one(token: str) -> Word:
-    phones, read = _read(_raw_phonemes(token))
+    phones, read = _read(_raw_phonemes(token), token)
     return Word(token, phones, read)
 
 
@@ -386,10 +400,10 @@ def _in_context(tokens: List[str]) -> List[Word]:
     alone = [_raw_phonemes(t) for t in tokens]
     whole = _raw_phonemes(" ".join(tokens))
     if len(whole) != sum(len(a) for a in alone) or not all(alone):
-        return [Word(t, *_read(a)) for t, a in zip(tokens, alone)]
+        return [Word(t, *_read(a, t)) for t, a in zip(tokens, alone)]
     out, k = [], 0
     for t, a in zip(tokens, alone):
-        out.append(Word(t, *_read(whole[k:k + len(a)])))
+        out.append(Word(t, *_read(whole[k:k + len(a)], t)))
         k += len(a)
     return out
 
@@ -455,7 +469,7 @@ def transcribe(text: str, lang: str) -> List[Word]:
                 if _HAN.search(reading):
                     out.append(Word(surface, (), False))
                 else:
-                    phones, read = _read(_raw_phonemes(reading))
+                    phones, read = _read(_raw_phonemes(reading), reading)
                     out.append(Word(surface, phones, read))
             return out
         tokens = _tokens(text)
