@@ -178,3 +178,11 @@ def test_without_the_lang_extra_another_language_says_how_to_install_it(tmp_path
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert r.returncode == 2 and "pip install 'lipsync[lang]'" in r.stderr, r.stderr
     assert "Traceback" not in r.stderr
+
+
+def test_the_fit_check_warns_when_another_sentence_is_given():
+    from lipsync.speech.align import AlignmentWarning
+
+    with pytest.warns(AlignmentWarning, match="confidence 0"):
+        al = align(FR_CLIP, "Le petit bateau bleu passe sous le pont de pierre.", lang="fr", jobs=1)
+    assert al.confidence < 0.5
