@@ -34,7 +34,7 @@ import time
 import warnings
 import wave
 from pathlib import Path
-from typing import Dict, List, Optional, Sequence, Tuple
+from typing import List, Optional, Sequence, Tuple
 
 import numpy as np
 

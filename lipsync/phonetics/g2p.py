@@ -254,7 +254,6 @@ _DROP = re.compile(r"[ˈˌ\-‿|]")
 _SWITCH = re.compile(r"\([a-z\-]+\)")
 # Han characters (CJK ideographs and their extensions): one syllable each, no spaces between words.
 _HAN = re.compile(r"[\u3400-\u4dbf\u4e00-\u9fff\uf900-\ufaff\U00020000-\U0002ffff]")
-_KANA = re.compile(r"[\u3040-\u30ff\u31f0-\u31ff\uff66-\uff9f]")
 # A word: letters and marks (apostrophes and hyphens inside a word keep it whole, as in
 # "l'avion", "dix-sept"), or a number with its separators, or a spoken symbol.
 _JOINERS = "'\u2019-"
@@ -415,7 +414,7 @@ def _japanese_tokens(text: str) -> List[Tuple[str, str]]:
     finds the words and their pronunciations.
     """
     try:
-        from janome.tokenizer import Tokenizer
+        import janome.tokenizer  # noqa: F401  (part of the lang extra; without it, spaces split words)
     except ImportError:
         return [(t, t) for t in _tokens(text)]
     out = []
