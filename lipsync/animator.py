@@ -80,7 +80,7 @@ class Animator:
             timeline = read_timeline(timeline, getattr(o, "timeline_format", None), tier=getattr(o, "tier", None),
                                      sample_rate=getattr(o, "sample_rate", 16000),
                                      fps=getattr(o, "moho_fps", 24.0), text=getattr(o, "text", None),
-                                     quiet=getattr(o, "quiet", True))
+                                     quiet=getattr(o, "quiet", True), lang=getattr(o, "lang", None))
         pmap = map if isinstance(map, PhonemeMap) else load_map(map or DEFAULT_MAP)
         map_path = map if isinstance(map, (str, os.PathLike)) and os.path.isfile(map) else None
         self.visemes, pmap = bank_viseme_timeline(timeline, pmap, self.bank.names, rest=self.bank.rest,

@@ -175,7 +175,8 @@ def render_clip(timeline, output: PathLike, *, bank=None, audio: Optional[PathLi
                 fps: float = DEFAULT_FPS, map=None, method: str = "flow", timing=None,
                 format: Optional[str] = None, crf: int = DEFAULT_CRF, preset: str = DEFAULT_PRESET,
                 store=None, jobs: Optional[int] = None, quiet: bool = False,
-                timeline_options=None, progress=None, background=None, composite=None) -> ClipReport:
+                timeline_options=None, progress=None, background=None, composite=None,
+                lang: Optional[str] = None) -> ClipReport:
     """Render one clip to ``output`` (a video, an animation, or a folder of numbered PNGs).
 
     Parameters
@@ -206,7 +207,7 @@ def render_clip(timeline, output: PathLike, *, bank=None, audio: Optional[PathLi
         No progress bars.
     timeline_options : object, optional
         Reader options (attributes ``timeline_format``, ``tier``, ``sample_rate``,
-        ``moho_fps``, ``text``) when ``timeline`` is a path.
+        ``moho_fps``, ``text``, ``lang``) when ``timeline`` is a path.
     progress : callable, optional
         ``progress(done, total)`` after each frame is rendered (``lipsync serve`` reports
         job progress with it).
@@ -216,6 +217,9 @@ def render_clip(timeline, output: PathLike, *, bank=None, audio: Optional[PathLi
     composite : lipsync.composite.Composite or False, optional
         The body the mouth is drawn on (default: the bank's ``composite:``); False renders
         the mouth alone.
+    lang : str, optional
+        Language of audio input and its transcript (BCP 47; default English): see
+        :func:`lipsync.speech.align.align`. Overrides ``timeline_options.lang``.
 
     Returns
     -------
@@ -234,6 +238,11 @@ def render_clip(timeline, output: PathLike, *, bank=None, audio: Optional[PathLi
     from .store import FlowStore
 
     t0 = time.perf_counter()
+    if lang is not None:
+        import types
+
+        given = vars(timeline_options) if timeline_options is not None else {}
+        timeline_options = types.SimpleNamespace(**{**given, "lang": lang})
     if not 0 <= crf <= 51:
         raise InputError(f"--crf must be 0..51, got {crf}")
     check_preset(preset)  # before any work, whatever the format (ffmpeg said so only after it)

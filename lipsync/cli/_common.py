@@ -73,6 +73,34 @@ def add_quiet_option(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--quiet", "-q", action="store_true", help="no progress bars or summary")
 
 
+def lang_code(value: str) -> str:
+    """argparse type of ``--lang``: an English tag as given, any other checked against espeak-ng's.
+
+    An unknown code (or a missing espeak-ng extra) stops the command before any work, with
+    exit 2 and the list of codes.
+    """
+    from ..errors import InputError
+    from ..phonetics.g2p import is_english, resolve
+
+    if not is_english(value):
+        try:
+            resolve(value)
+        except InputError as exc:
+            raise argparse.ArgumentTypeError(str(exc)) from None
+    return value
+
+
+#: --lang's help, shared by every command that has the option.
+LANG_HELP = ("language of the speech and transcript, as a BCP 47 tag (fr, pt-BR, zh, ru, ...); default "
+             "English. Other languages need the optional espeak-ng extra (pip install 'lipsync[lang]', "
+             "GPL-3): words to IPA by espeak-ng, aligned with the closest English sounds; phones in IPA")
+
+
+def add_lang_option(parser) -> None:
+    """``--lang CODE``: the language of audio input and its transcript."""
+    parser.add_argument("--lang", type=lang_code, default=None, metavar="CODE", help=LANG_HELP)
+
+
 def check_png(path: str) -> None:
     """Refuse an output name that is not a .png (before any work is done)."""
     from ..errors import InputError
@@ -89,7 +117,7 @@ TIMING_HELP = (f"how the mouth moves: a transition curve of the rule-based seque
 
 
 def add_timeline_options(parser: argparse.ArgumentParser) -> None:
-    """Add --timeline-format, --tier, --sample-rate, --moho-fps, --text, --map and --timing to ``parser``."""
+    """Add --timeline-format, --tier, --sample-rate, --moho-fps, --text, --lang, --map and --timing to ``parser``."""
     group = parser.add_argument_group("timeline input")
     group.add_argument("--timeline-format", choices=READERS.names(), default=None, metavar="NAME",
                        help="input timeline format (default: from the extension, then the content); "
@@ -105,6 +133,7 @@ def add_timeline_options(parser: argparse.ArgumentParser) -> None:
                        help="for audio input: its transcript, or a text file holding it "
                             "(default: the words are recognised)")
     add_mismatch_option(group)
+    add_lang_option(group)
     group.add_argument("--map", default=DEFAULT_MAP, metavar="NAME_OR_FILE",
                        help=f"phoneme-to-viseme map: a shipped name ({', '.join(MAPS.names())}) "
                             f"or a YAML file (default: {DEFAULT_MAP})")
@@ -150,7 +179,8 @@ def load_viseme_timeline(args: argparse.Namespace, *, rest: Optional[str] = None
                              tier=getattr(args, "tier", None),
                              sample_rate=getattr(args, "sample_rate", 16000),
                              fps=getattr(args, "moho_fps", DEFAULT_MOHO_FPS),
-                             text=getattr(args, "text", None), quiet=getattr(args, "quiet", True))
+                             text=getattr(args, "text", None), quiet=getattr(args, "quiet", True),
+                             lang=getattr(args, "lang", None))
     map_arg = str(getattr(args, "map", None) or "")
     return bank_viseme_timeline(timeline, pmap, viseme_names, rest=rest,
                                 map_path=map_arg if os.path.isfile(map_arg) else None)

@@ -12,9 +12,9 @@ _PHOTO_ONLY = {"template": "toon", "names": [], "face_box": None, "layout": "aut
 
 
 def add_video_options(p: argparse.ArgumentParser) -> None:
-    """Add --video, --text, --map, --size and --quiet to the ``init`` parser."""
+    """Add --video, --text, --lang, --map, --size and --quiet to the ``init`` parser."""
     from ..phonemes import DEFAULT_MAP, MAPS
-    from ._common import add_jobs_option, add_quiet_option
+    from ._common import add_jobs_option, add_lang_option, add_quiet_option
     from ..videobank.config import DEFAULT_MAX_SIDE
 
     g = p.add_argument_group("a new subject from video (DIR is the bank folder to make)")
@@ -25,6 +25,7 @@ def add_video_options(p: argparse.ArgumentParser) -> None:
                    help="transcript of the video (one video only); else NAME.txt or NAME.lab beside each "
                         "video, else the words are recognised")
     add_mismatch_option(g)
+    add_lang_option(g)
     g.add_argument("--map", default=DEFAULT_MAP, metavar="NAME_OR_FILE",
                    help=f"phoneme-to-viseme map whose visemes the bank gets: {', '.join(MAPS.names())} or a "
                         f"YAML file (default: {DEFAULT_MAP})")
@@ -44,7 +45,7 @@ def run_video(args: argparse.Namespace) -> int:
             raise InputError(f"--{name.replace('_', '-')} is for a folder of images; with --video the lines "
                              f"come from the face in the video")
     config = VideoBankConfig(map=args.map, size=parse_size(args.size) if args.size else None, force=args.force,
-                             quiet=args.quiet, jobs=args.jobs)
+                             quiet=args.quiet, jobs=args.jobs, lang=args.lang)
     result = make_bank(args.folder, args.video, text=args.text, config=config)
     if not args.quiet:
         print(result.summary())

@@ -10,15 +10,18 @@ import sys
 
 def add_parser(sub) -> None:
     from ..speech.export import ALIGNMENT_FORMATS
+    from ._common import add_lang_option
 
     p = sub.add_parser("align", help="align speech audio to words and phones (TextGrid or JSON)",
                        description="Find the words and phones of a recording and when each is spoken, with "
                                    "pocketsphinx, offline. With --text the transcript is aligned; without it "
-                                   "the words are recognised first. Long recordings are split at pauses.")
+                                   "the words are recognised first. Long recordings are split at pauses. With "
+                                   "--lang (other than English) the phones tier is IPA.")
     p.add_argument("audio", metavar="AUDIO", help="speech audio: any file ffmpeg reads (wav, flac, mp3, m4a, ogg, ...)")
     p.add_argument("--text", default=None, metavar="TEXT_OR_FILE",
                    help="the transcript, or a UTF-8 text file holding it (default: recognise the words)")
     add_mismatch_option(p)
+    add_lang_option(p)
     p.add_argument("-o", "--output", required=True, metavar="OUT",
                    help="output file (.TextGrid: Praat long form with tiers words and phones; .json)")
     p.add_argument("--format", choices=ALIGNMENT_FORMATS.names(), default=None,
@@ -41,7 +44,7 @@ def run(args: argparse.Namespace) -> int:
     if not os.path.isdir(folder):  # before the work, not after it
         raise InputError("the output's folder does not exist", path=args.output)
     t0 = time.perf_counter()
-    alignment = align(args.audio, args.text, quiet=args.quiet)
+    alignment = align(args.audio, args.text, quiet=args.quiet, lang=args.lang)
     write_alignment(alignment, args.output, args.format)
     if not args.quiet:
         dt = time.perf_counter() - t0

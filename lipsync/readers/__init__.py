@@ -55,7 +55,7 @@ _SNIFF_BYTES = 4096
 
 def read_timeline(path: PathLike, format: Optional[str] = None, *, tier: Optional[str] = None,
                   sample_rate: float = 16000, fps: float = 24.0, text: Optional[str] = None,
-                  quiet: bool = True) -> Timeline:
+                  quiet: bool = True, lang: Optional[str] = None) -> Timeline:
     """Read a phoneme or viseme timeline from any supported file.
 
     Parameters
@@ -74,6 +74,8 @@ def read_timeline(path: PathLike, format: Optional[str] = None, *, tier: Optiona
         For audio: its transcript, or a file holding it (default: the words are recognised).
     quiet : bool
         For audio: no progress bar while aligning.
+    lang : str, optional
+        For audio: its language (BCP 47; default English), see :func:`lipsync.speech.align.align`.
 
     Returns
     -------
@@ -110,7 +112,8 @@ def read_timeline(path: PathLike, format: Optional[str] = None, *, tier: Optiona
         raise TimelineError("empty file", path=name, line=1)
     if reader is None:
         reader = _choose_reader(name, data)
-    options = ReadOptions(tier=tier, sample_rate=float(sample_rate), fps=float(fps), text=text, quiet=bool(quiet))
+    options = ReadOptions(tier=tier, sample_rate=float(sample_rate), fps=float(fps), text=text, quiet=bool(quiet),
+                          lang=lang)
     return reader.read(name, data, options)
 
 

@@ -65,7 +65,8 @@ def read(path: str, data: bytes, options: ReadOptions) -> Timeline:
     from ..speech.align import align
     from .textgrid import normalise_label
 
-    alignment = align(path, getattr(options, "text", None), quiet=getattr(options, "quiet", True))
+    alignment = align(path, getattr(options, "text", None), quiet=getattr(options, "quiet", True),
+                      lang=getattr(options, "lang", None))
     if (options.tier or "phones") == "words":
         return alignment.words
     return alignment.phones.replace(segments=tuple(

@@ -24,6 +24,7 @@ class ReadOptions:
     fps: float = 24.0
     text: Optional[str] = None
     quiet: bool = True
+    lang: Optional[str] = None
 
 
 @dataclass(frozen=True)

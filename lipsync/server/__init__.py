@@ -5,7 +5,7 @@ Routes (all but the page and its static files need the session token, see
 headers and bounds request bodies):
 
 * ``GET /`` -- the demo page: plays ``samples/hello.wav`` and draws the live head on a canvas;
-* ``POST /api/render?name=FILE[&text=...][&format=NAME][&fps=N]`` -- the body is a timeline
+* ``POST /api/render?name=FILE[&text=...][&format=NAME][&fps=N][&lang=CODE]`` -- the body is a timeline
   or audio file; answers ``202 {"job": ID, ...}``; ``GET /api/jobs/ID`` reports state and
   progress, ``GET /api/jobs/ID/video`` gives the mp4;
 * ``WS /ws/live`` -- a live session (:mod:`.protocol`): push events and the clock, get frames;
@@ -172,7 +172,7 @@ class LiveServer:
                 # as `lipsync render --fps` checks it (fps=0 once rendered at the default 25)
                 fps = check_fps(q["fps"]) if "fps" in q else None
                 job = self.jobs.submit(body, q.get("name", ""), text=q.get("text"),
-                                       timeline_format=q.get("format"), fps=fps)
+                                       timeline_format=q.get("format"), fps=fps, lang=q.get("lang"))
             except (InputError, ValueError) as exc:
                 return JSONResponse({"error": str(exc)}, status_code=400)
             except Busy as exc:

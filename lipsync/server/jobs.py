@@ -59,7 +59,7 @@ class Jobs:
         self._executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="lipsync-render")
 
     def submit(self, data: bytes, name: str, *, text: Optional[str] = None, timeline_format: Optional[str] = None,
-               fps: Optional[float] = None) -> Job:
+               fps: Optional[float] = None, lang: Optional[str] = None) -> Job:
         """Queue ``data`` (a timeline or audio file called ``name`` by the client)."""
         from ..readers import READERS
 
@@ -68,6 +68,11 @@ class Jobs:
             raise InputError(f"upload name {name[:60]!r}: unusable extension")
         if timeline_format is not None:
             READERS.get(timeline_format)  # UnknownNameError lists the valid ones
+        if lang is not None:
+            from ..phonetics.g2p import is_english, resolve
+
+            if not is_english(lang):
+                resolve(lang)  # UnknownLanguageError lists the codes
         if fps is not None:
             from ..sequencer import check_fps
 
@@ -89,7 +94,7 @@ class Jobs:
         source = folder / f"input{ext}"
         source.write_bytes(data)
         options = types.SimpleNamespace(timeline_format=timeline_format, tier=None, sample_rate=16000,
-                                        moho_fps=24.0, text=None)
+                                        moho_fps=24.0, text=None, lang=lang)
         if text:
             transcript = folder / "transcript.txt"
             transcript.write_text(text, encoding="utf-8")

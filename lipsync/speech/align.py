@@ -48,6 +48,7 @@ Examples
 
 from __future__ import annotations
 
+import contextvars
 import functools
 import os
 import re
@@ -97,6 +98,13 @@ SILENCE_DBFS = -50.0
 #: notice (ITU-R BT.1359: sound lagging picture is detected from about 125 ms), so the
 #: frame-centre correction is not applied.
 BOUNDARY_OFFSET_S = 0.0
+#: The same shift for languages other than English: one frame (10 ms) later. Their words
+#: are aligned with approximate units, and their figures are measured against espeak-ng's
+#: exact phoneme times in 20 languages (``make bench``'s languages figure): the median
+#: boundary there is 10.2 ms early, as for English, and at 25 fps this frame decides which
+#: mouth shape a frame shows (mean agreement 0.735 unshifted, see the figure's
+#: ``text_frames_agree_unshifted`` column). English keeps 0 for its measured reasons above.
+BOUNDARY_OFFSET_OTHER_S = 0.01
 
 #: Below this confidence a transcript is reported as not fitting the audio.
 LOW_CONFIDENCE = 0.5
@@ -224,11 +232,28 @@ ALIGNER_SETTINGS = dict(topn=8, bestpath=False, fsgusealtpron=False)
 _LOOP = "loop"
 
 
-@functools.lru_cache(maxsize=1)
+#: Beams of the aligner for languages other than English (:mod:`lipsync.speech.languages`),
+#: whose sounds the en-us models fit less well. Measured on the 26 recordings of ``make
+#: bench``'s languages figures (20 espeak-ng sentences, 6 real recordings) with their own
+#: transcripts: with pocketsphinx's default beams (1e-48) the grammar search pruned every
+#: path of the transcript's words in 9 (all synthetic: no alignment at all), with 1e-80 in
+#: 4, with 1e-120 and 1e-200 in none; the search ran at 83, 72, 66 and 63 times real time.
+#: 1e-200 leaves a margin (the fit rules below were measured with it).
+WIDE_BEAMS = dict(beam=1e-200, pbeam=1e-200, wbeam=1e-200)
+#: True while another language is aligned: :func:`_aligner` gives the wide-beam decoder and
+#: the fit check takes the other languages' rules (:func:`_fit_rules`).
+_WIDE = contextvars.ContextVar("lipsync_other_language", default=False)
+
+
 def _aligner():
+    return _aligner_for(_WIDE.get())
+
+
+@functools.lru_cache(maxsize=2)
+def _aligner_for(wide: bool):
     from pocketsphinx import Decoder
 
-    d = Decoder(lm=None, loglevel="FATAL", **ALIGNER_SETTINGS)
+    d = Decoder(lm=None, loglevel="FATAL", **ALIGNER_SETTINGS, **(WIDE_BEAMS if wide else {}))
     # pocketsphinx's phone recogniser with no phone language model: any context-independent
     # phone may follow any other (allphone_ci is pocketsphinx's default). Until issue 20's
     # third round the loop was a grammar of the 39 one-phone words, whose cross-word
@@ -245,14 +270,24 @@ def _recogniser():
     return Decoder(loglevel="FATAL", **RECOGNISER_SETTINGS)
 
 
+#: Pronunciations (en-us acoustic units) of the words of other languages, by their decoder
+#: names (:mod:`lipsync.speech.languages` makes them: ``ipa_`` and a digest of the word and
+#: its units, so one name never has two pronunciations in a decoder's dictionary).
+_CUSTOM: dict = {}
+
+
 def _ensure_words(decoder, words: Sequence[str]) -> None:
-    for w in lookup_missing(words):
+    for w in lookup_missing([w for w in words if w not in _CUSTOM]):
         if decoder.lookup_word(w) is None:
             decoder.add_word(w, " ".join(p.rstrip("012") for p in pronounce(w)), True)
 
 
 def _arcs(decoder, word: str) -> List[str]:
     """The decoder's dictionary names of ``word``'s pronunciations (added when missing)."""
+    if word in _CUSTOM:
+        if decoder.lookup_word(word) is None:
+            decoder.add_word(word, " ".join(_CUSTOM[word]), True)
+        return [word]
     names = []
     for name, phones in pronunciations(word):
         if decoder.lookup_word(name) is None:
@@ -483,7 +518,7 @@ def _acoustic_fit(loop: Optional[np.ndarray], forced: Optional[_Forced],
     ratio = _lower_mean(forced.frames[:n] - loop[:n], (forced.words, speech))
     if ratio is None:
         return None
-    return float(np.clip(0.5 + (ratio - FIT_LLR_CENTRE) / (2 * FIT_LLR_SPAN), 0.0, 1.0))
+    return float(np.clip(0.5 + (ratio - _fit_rules()[1]) / (2 * FIT_LLR_SPAN), 0.0, 1.0))
 
 
 def _lower_mean(values: np.ndarray, masks) -> Optional[float]:
@@ -559,6 +594,33 @@ def _fitting_words(pcm: np.ndarray, words: Sequence[str], *, prefix: bool = Fals
 FIT_WITHOUT_LOOP = -20.0
 
 
+#: The fit check's rules for languages other than English, whose words are spelled in the
+#: closest en-us units and so score lower against the free phone loop than English words
+#: do. Measured on ``make bench``'s languages figures (the grammar search's score a frame
+#: against the loop's, the lower of words and speech frames; in brackets the search's own
+#: score): the six real recordings with their own transcripts -24.4 to -8.8 (-38.1 to
+#: -22.0); the 20 espeak-ng sentences with theirs -27.9 to -11.2 (-51.1 to -29.8: synthetic
+#: voices fit the en-us models worse); each real recording with the synthetic sentence of
+#: its language as transcript -50.2, -44.1, -40.9, -36.7, -35.7 and -31.5 (-64.1 to -45.2),
+#: and each synthetic sentence with the real recording's transcript no path at all. So:
+#: the loop is skipped from an own score of -41.5 (between -38.1 and -45.2); the centre -28
+#: lies between the lowest right real transcript and the highest wrong one, so every right
+#: one (synthetic ones too) fits at 0.5 or more and every wrong one at most 0.33 (a
+#: warning); and the relaxed search, which may leave words out, runs only below a fit of
+#: 0.1 (a ratio of -36): for four of the six wrong transcripts, and none of the right ones.
+FIT_WITHOUT_LOOP_OTHER = -41.5
+FIT_LLR_CENTRE_OTHER = -28.0
+NOT_FIT_CONFIDENCE_OTHER = 0.1
+
+
+def _fit_rules() -> Tuple[float, float, float]:
+    """(score that skips the loop, fit centre, fit below which words may be left out) for
+    the language being aligned."""
+    if _WIDE.get():
+        return FIT_WITHOUT_LOOP_OTHER, FIT_LLR_CENTRE_OTHER, NOT_FIT_CONFIDENCE_OTHER
+    return FIT_WITHOUT_LOOP, FIT_LLR_CENTRE, NOT_FIT_CONFIDENCE
+
+
 def _own_score(frames: Optional[np.ndarray], in_words: Optional[np.ndarray],
                speech: Optional[np.ndarray]) -> Optional[float]:
     """The grammar search's mean score a frame over the words' frames and over the speech
@@ -584,7 +646,7 @@ def _align_words(pcm: np.ndarray, words: Sequence[str], loop: "_PhoneLoop", spee
     def searched(frames, in_words) -> None:
         nonlocal clear
         score = _own_score(frames, in_words, speech)
-        clear = score is not None and score >= FIT_WITHOUT_LOOP
+        clear = score is not None and score >= _fit_rules()[0]
         if not clear:
             loop.start()
 
@@ -593,7 +655,7 @@ def _align_words(pcm: np.ndarray, words: Sequence[str], loop: "_PhoneLoop", spee
         return forced.timings, [], None
     loop.start()
     fit = _acoustic_fit(loop(), forced, speech) if forced is not None else None
-    if forced is not None and (fit is None or fit >= NOT_FIT_CONFIDENCE):
+    if forced is not None and (fit is None or fit >= _fit_rules()[2]):
         return forced.timings, [], fit
     kept_at = set(_fitting_words(pcm, words))
     kept = [w for i, w in enumerate(words) if i in kept_at]
@@ -661,14 +723,33 @@ def _recognise(pcm: np.ndarray) -> Tuple[List[str], List[_WordTiming]]:
 
 def _even_phones(word: str, start: int, end: int) -> _WordTiming:
     word = _VARIANT.sub("", word).lower()
-    phones = [p.rstrip("012") for p in pronounce(word)] or ["AH"]
+    phones = list(_CUSTOM[word]) if word in _CUSTOM else [p.rstrip("012") for p in pronounce(word)] or ["AH"]
     edges = np.linspace(start, end, len(phones) + 1).round().astype(int)
     return word, start, end, [(p, int(a), int(b)) for p, a, b in zip(phones, edges[:-1], edges[1:])]
 
 
+def _loop_phones(pcm: np.ndarray) -> Tuple[List[str], List[_WordTiming]]:
+    """Phones the free phone loop hears in ``pcm`` (any language), each as a nameless word.
+
+    pocketsphinx's en-us context-independent phones, any one after any other (the fit
+    check's search, :func:`_phone_loop_scores`): what Rhubarb Lip Sync's "phonetic"
+    recogniser does for speech in languages it has no model for.
+    """
+    d = _aligner()
+    try:
+        d.activate_search(_LOOP)
+        _decode(d, pcm)
+        if d.hyp() is None:
+            return [], []
+        segs = [(s.word, s.start_frame, s.end_frame + 1) for s in d.seg()]
+    except RuntimeError:
+        return [], []
+    return [], [("", a, b, [(p, a, b)]) for p, a, b in segs if p not in _NON_SPEECH_PHONES and b > a]
+
+
 def _chunk_job(job):
-    """One chunk's work, ("recognise", pcm): runs in a worker process."""
-    return _recognise(job[1])
+    """One chunk's work, ("recognise" or "loop", pcm): runs in a worker process."""
+    return _loop_phones(job[1]) if job[0] == "loop" else _recognise(job[1])
 
 
 def _can_fork() -> bool:
@@ -801,7 +882,7 @@ WINDOW_FACTOR = 2.0
 WINDOW_MARGIN = 20
 
 
-def _align_long(piece, chunks, transcript, energy, bar):
+def _align_long(piece, chunks, transcript, energy, bar, recogniser: str = "recognise"):
     """Align a long transcript chunk by chunk, each taking the next words that fit it.
 
     Returns (timings per chunk, words skipped, number of words that could not be aligned).
@@ -824,7 +905,7 @@ def _align_long(piece, chunks, transcript, energy, bar):
         forced = _force_align(piece(a, b), kept) if kept else _Forced([])
         if forced is None:  # the words found do not align after all: what is heard there
             failed += len(kept)
-            got = _recognise(piece(a, b))[1]
+            got = _chunk_job((recogniser, piece(a, b)))[1]
         else:
             got = forced.timings
         per_chunk.append(got)
@@ -874,7 +955,7 @@ def read_transcript(text: Optional[str]) -> Optional[str]:
 
 
 def align_samples(pcm: np.ndarray, text: Optional[str] = None, *, quiet: bool = True,
-                  path: Optional[str] = None, jobs: Optional[int] = None) -> Alignment:
+                  path: Optional[str] = None, jobs: Optional[int] = None, lang: Optional[str] = None) -> Alignment:
     """Align 16 kHz mono int16 samples with an optional transcript.
 
     Parameters
@@ -890,10 +971,20 @@ def align_samples(pcm: np.ndarray, text: Optional[str] = None, *, quiet: bool = 
     jobs : int, optional
         Processes for long or untranscribed audio, and from 2 on a second one that checks
         a transcript's fit beside its alignment (default: all cores; 1: none).
+    lang : str, optional
+        The language (BCP 47: ``fr``, ``pt-BR``, ``zh``); None or English: CMUdict and
+        ARPAbet phones. Any other: :func:`lipsync.speech.languages.align_language` (IPA
+        phones; needs the optional espeak-ng extra).
 
     Returns
     -------
     Alignment
+
+    Raises
+    ------
+    lipsync.errors.InputError
+        An English transcript with no word in Latin letters (Cyrillic, Chinese, ...): the
+        message names the script and the ``--lang`` to pass; an unknown ``lang``.
 
     Warns
     -----
@@ -910,21 +1001,49 @@ def align_samples(pcm: np.ndarray, text: Optional[str] = None, *, quiet: bool = 
     >>> len(al.words), len(al.phones), al.duration
     (0, 0, 1.0)
     """
-    from tqdm import tqdm
+    from ..phonetics.g2p import is_english
 
-    pcm = np.asarray(pcm)
-    if pcm.dtype.kind == "f":
-        pcm = np.clip(np.round(pcm * 32767.0), -32768, 32767).astype(np.int16)
-    pcm = pcm.astype(np.int16, copy=False).reshape(-1)
-    duration = len(pcm) / SAMPLE_RATE
-    workers = max(1, jobs if jobs is not None else (os.cpu_count() or 1))
+    if not is_english(lang):
+        from .languages import align_language
+
+        return align_language(pcm, text, lang, quiet=quiet, path=path, jobs=jobs)
+    pcm = _as_pcm(pcm)
     transcript = tuple(normalise_transcript(text)) if text is not None else ()
-    has_text = bool(transcript)  # blank or punctuation only: no words, so recognise
+    if text is not None:
+        from .languages import check_english_script
+
+        check_english_script(text, transcript, path=path)
     missing = tuple(lookup_missing(transcript))
     if missing:
         warnings.warn(f"{path or 'transcript'}: {len(missing)} word(s) not in the dictionary, "
                       f"pronounced by letter-to-sound rules: {', '.join(missing)}",
                       MissingWordsWarning, stacklevel=2)
+    return _align_pcm(pcm, transcript, quiet=quiet, path=path, jobs=jobs, missing=missing)
+
+
+def _as_pcm(pcm) -> np.ndarray:
+    """16-bit samples of int16 or -1..1 float input, flat."""
+    pcm = np.asarray(pcm)
+    if pcm.dtype.kind == "f":
+        pcm = np.clip(np.round(pcm * 32767.0), -32768, 32767).astype(np.int16)
+    return pcm.astype(np.int16, copy=False).reshape(-1)
+
+
+def _align_pcm(pcm: np.ndarray, transcript: Tuple[str, ...], *, quiet: bool, path: Optional[str],
+               jobs: Optional[int], missing: Tuple[str, ...] = (), recogniser: str = "recognise",
+               shown=None) -> Alignment:
+    """:func:`align_samples` once the transcript is words the decoder can name.
+
+    ``recogniser`` is what listens where no transcript fits ("recognise": US-English words;
+    "loop": free phones, for other languages); ``shown`` turns decoder names into the
+    words the messages show.
+    """
+    from tqdm import tqdm
+
+    show = shown or (lambda w: w)
+    duration = len(pcm) / SAMPLE_RATE
+    workers = max(1, jobs if jobs is not None else (os.cpu_count() or 1))
+    has_text = bool(transcript)  # blank or punctuation only: no words, so recognise
     energy = _frame_energy(pcm)
     if len(energy) == 0 or float(energy.max()) < SILENCE_DBFS:
         return Alignment(_timeline((), duration, path), _timeline((), duration, path), duration,
@@ -950,7 +1069,7 @@ def align_samples(pcm: np.ndarray, text: Optional[str] = None, *, quiet: bool = 
         else:
             if has_text and duration > MAX_CHUNK_S:
                 chunks = _plan_chunks(energy, MAX_CHUNK_S)
-                per_chunk, skipped, failed = _align_long(piece, chunks, transcript, energy, bar)
+                per_chunk, skipped, failed = _align_long(piece, chunks, transcript, energy, bar, recogniser)
             else:
                 # No transcript, or a short one that does not fit at all: recognise chunk by
                 # chunk (in parallel when there are enough), then align what was heard.
@@ -958,7 +1077,7 @@ def align_samples(pcm: np.ndarray, text: Optional[str] = None, *, quiet: bool = 
                 bar.total = len(chunks)
                 bar.refresh()
                 workers = workers if len(chunks) >= MIN_CHUNKS_FOR_WORKERS else 1
-                per_chunk = [t for _, t in _run_jobs([("recognise", piece(a, b)) for a, b in chunks], workers, bar)]
+                per_chunk = [t for _, t in _run_jobs([(recogniser, piece(a, b)) for a, b in chunks], workers, bar)]
                 failed, skipped = len(transcript), []
             for (a, _), got in zip(chunks, per_chunk):
                 timings += [(w, ws + a, we + a, [(p, ps + a, pe + a) for p, ps, pe in ph])
@@ -980,7 +1099,7 @@ def align_samples(pcm: np.ndarray, text: Optional[str] = None, *, quiet: bool = 
             what = "does not fit the audio"
             if skipped:
                 what += (f": {len(skipped)} of its {len(transcript)} words were not found and were left out "
-                         f"({_some(skipped)})")
+                         f"({_some([show(w) for w in skipped])})")
             if failed:
                 what += (f"{',' if skipped else ':'} {failed} of its {len(transcript)} words could not be "
                          "aligned, and the words recognised there were used instead")
@@ -993,7 +1112,7 @@ def align_samples(pcm: np.ndarray, text: Optional[str] = None, *, quiet: bool = 
                           # transcript, worth aligning; words not found as well: the wrong one
                           TranscriptMismatchWarning if confidence < NO_FIT_CONFIDENCE and (failed or skipped)
                           else AlignmentWarning,
-                          stacklevel=2)
+                          stacklevel=3)
     return _to_alignment(timings, duration, path, transcript if has_text else tuple(w for w, *_ in timings),
                          recognised=not has_text or failed > 0, confidence=confidence, missing=missing,
                          skipped=tuple(skipped) if has_text else ())
@@ -1024,7 +1143,7 @@ def _speech_in_words(energy: np.ndarray, timings: List[_WordTiming]) -> float:
 
 
 def align(audio: Union[PathLike, np.ndarray], text: Optional[str] = None, *, quiet: bool = True,
-          jobs: Optional[int] = None) -> Alignment:
+          jobs: Optional[int] = None, lang: Optional[str] = None) -> Alignment:
     """Words and phones of a recording, with or without its transcript.
 
     Parameters
@@ -1039,6 +1158,8 @@ def align(audio: Union[PathLike, np.ndarray], text: Optional[str] = None, *, qui
     jobs : int, optional
         Processes for long or untranscribed audio, and from 2 on a second one that checks
         a transcript's fit beside its alignment (default: all cores; 1: none).
+    lang : str, optional
+        The language of the speech (BCP 47), see :func:`align_samples`.
 
     Returns
     -------
@@ -1048,6 +1169,8 @@ def align(audio: Union[PathLike, np.ndarray], text: Optional[str] = None, *, qui
     ------
     lipsync.speech.audio.AudioError
         The audio file cannot be read (the message names it).
+    lipsync.errors.InputError
+        A transcript the language cannot read; an unknown ``lang``.
 
     Examples
     --------
@@ -1068,7 +1191,7 @@ def align(audio: Union[PathLike, np.ndarray], text: Optional[str] = None, *, qui
     else:
         path = os.fspath(audio)
         pcm = load_audio(path)
-    return align_samples(pcm, read_transcript(text), quiet=quiet, path=path, jobs=jobs)
+    return align_samples(pcm, read_transcript(text), quiet=quiet, path=path, jobs=jobs, lang=lang)
 
 
 def _timeline(segments, duration: float, path: Optional[str]) -> Timeline:
@@ -1077,9 +1200,11 @@ def _timeline(segments, duration: float, path: Optional[str]) -> Timeline:
 
 def _to_alignment(timings: List[_WordTiming], duration: float, path: Optional[str], transcript,
                   **kw) -> Alignment:
+    offset = BOUNDARY_OFFSET_OTHER_S if _WIDE.get() else BOUNDARY_OFFSET_S
+
     def t(frame: int) -> float:
         # rounded to 1 us so files show 0.82, not 0.8200000000000001 (frames are 10 ms)
-        return min(max(round(frame * FRAME_S + BOUNDARY_OFFSET_S, 6), 0.0), duration)
+        return min(max(round(frame * FRAME_S + offset, 6), 0.0), duration)
 
     words, phones = [], []
     for w, ws, we, ph in timings:

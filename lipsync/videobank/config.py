@@ -49,6 +49,9 @@ class VideoBankConfig:
         No progress bars.
     jobs : int, optional
         Processes for the flows (default: all cores).
+    lang : str, optional
+        Language of the speech and transcripts (BCP 47; default English): see
+        :func:`lipsync.speech.align.align`.
     flows : bool
         Compute the flows (a bank ready to render); off only for tests of the other steps.
     one_face : bool
@@ -71,6 +74,7 @@ class VideoBankConfig:
     flows: bool = True
     one_face: bool = True
     span: bool = True
+    lang: Optional[str] = None
 
     def __post_init__(self):
         if self.size is not None:

@@ -191,6 +191,11 @@ def make_bank(outdir: PathLike, videos: Sequence[PathLike], *, text: Optional[st
     t0 = time.perf_counter()
     pmap = load_map(cfg.map)
     sources = find_sources(videos, text, texts=texts)
+    from ..speech.languages import check_transcript
+
+    for s in sources:  # a transcript nothing reads is refused before the long work (issue 32)
+        if s.text is not None:
+            check_transcript(s.text, cfg.lang, path=s.text_from if s.text_from != "--text" else "--text")
     seconds["probe"] = time.perf_counter() - t0
 
     footage = observe(sources, pmap, cfg, seconds)
@@ -237,7 +242,7 @@ def observe(sources: List[Source], pmap, cfg: VideoBankConfig, seconds: Dict[str
         t = time.perf_counter()
         for s, n in zip(sources, counts):
             bar.set_postfix_str(s.name)
-            speeches.append(transcribe(s, pmap, quiet=True, jobs=cfg.jobs))
+            speeches.append(transcribe(s, pmap, quiet=True, jobs=cfg.jobs, lang=cfg.lang))
             bar.update(n)
         seconds["align"] = time.perf_counter() - t
         # before the longer work: is there a pause long enough to show the rest shape?
@@ -399,7 +404,10 @@ def assemble(outdir: Path, footage: Footage, ranked: Dict[str, List[Candidate]],
         "cropped_short": list(frame.cut),
         "videos": [{
             "video": s.name, "fps": s.info.fps, "frames": len(tr), "size": list(s.info.size),
-            "transcript": s.text_from, "words": list(sp.words), "recognised": sp.recognised,
+            # a transcript that did not fit was not what the words came from (issue 32)
+            "transcript": s.text_from if not (sp.recognised and s.text is not None)
+            else f"{s.text_from} (not used: it does not fit the speech; the words were recognised)",
+            "lang": cfg.lang or "en", "words": list(sp.words), "recognised": sp.recognised,
             "confidence": None if sp.confidence is None else round(sp.confidence, 3),
             "face_found": round(float(tr.found.mean()), 4),
             "residual_median": round(float(np.nanmedian(reg.residual)), 4),

@@ -76,7 +76,8 @@ def viseme_spans(phones: Timeline, pmap: PhonemeMap) -> Tuple[Segment, ...]:
     return tuple(out)
 
 
-def transcribe(source: Source, pmap: PhonemeMap, *, quiet: bool = True, jobs: Optional[int] = None) -> Speech:
+def transcribe(source: Source, pmap: PhonemeMap, *, quiet: bool = True, jobs: Optional[int] = None,
+               lang: Optional[str] = None) -> Speech:
     """Align one video's speech (with its transcript when it has one) and map it to visemes.
 
     Warns
@@ -86,7 +87,7 @@ def transcribe(source: Source, pmap: PhonemeMap, *, quiet: bool = True, jobs: Op
     """
     from ..speech.align import align
 
-    al = align(source.path, source.text, quiet=quiet, jobs=jobs)
+    al = align(source.path, source.text, quiet=quiet, jobs=jobs, lang=lang)
     phones = Timeline(tuple(al.phones), kind=al.phones.kind, path=str(source.path), stated_end=al.duration)
     return Speech(source=source, words=tuple(al.words.labels()), phones=phones,
                   visemes=viseme_spans(phones, pmap), recognised=al.recognised, confidence=al.confidence)

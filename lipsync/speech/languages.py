@@ -1,0 +1,292 @@
+"""Speech in languages other than English: IPA phones aligned with pocketsphinx's en-us models.
+
+pocketsphinx ships acoustic models for US English only. For any language espeak-ng speaks
+(:mod:`lipsync.phonetics.g2p`):
+
+* with a transcript, each word's IPA segments (espeak-ng's letters to sounds) are given the
+  closest en-us acoustic unit by articulatory features
+  (:func:`lipsync.phonetics.closest_english`), and the words are aligned as English words
+  are (:func:`lipsync.speech.align.align_samples`: a grammar of exactly the transcript's
+  words, the fit check against a free phone loop, the tolerant search that may leave words
+  out). The phones tier then holds each word's IPA segments, each spanning the units it was
+  given.
+* without one, pocketsphinx's free phone loop (context-independent en-us phones, any after
+  any: Rhubarb Lip Sync's "phonetic" recogniser) listens, and its phones, written in IPA,
+  go straight to the mouth shapes. There are no words.
+
+The decoder knows each word by a name of its own (``ipa_`` and a digest of the word and
+its units), so words in any script reach a dictionary that expects ASCII.
+
+Examples
+--------
+>>> import numpy as np
+>>> from lipsync.phonetics.g2p import espeak_available
+>>> if espeak_available():
+...     al = align_language(np.zeros(8000, np.int16), "bonjour", "fr")
+...     print(al.duration, al.words.labels())
+... else:
+...     print(0.5, [])
+0.5 []
+"""
+
+from __future__ import annotations
+
+import hashlib
+import unicodedata
+import warnings
+from typing import Dict, List, Optional, Sequence, Tuple
+
+import numpy as np
+
+from ..errors import InputError
+from ..timeline import Segment
+
+__all__ = ["align_language", "check_english_script", "UnreadWordsWarning", "script_of"]
+
+
+class UnreadWordsWarning(UserWarning):
+    """Transcript words the language's letters-to-sounds cannot read were left out."""
+
+
+#: Scripts named by the first word of their letters' Unicode names, with the language to
+#: suggest for each (a user who pastes Cyrillic most likely means Russian; the message says
+#: "for example").
+_SCRIPTS: Dict[str, Tuple[str, str]] = {
+    "CYRILLIC": ("Cyrillic", "ru"), "CJK": ("Chinese (Han)", "zh"), "HIRAGANA": ("Japanese (kana)", "ja"),
+    "KATAKANA": ("Japanese (kana)", "ja"), "HANGUL": ("Korean (Hangul)", "ko"), "ARABIC": ("Arabic", "ar"),
+    "GREEK": ("Greek", "el"), "DEVANAGARI": ("Devanagari", "hi"), "HEBREW": ("Hebrew", "he"),
+    "THAI": ("Thai", "th"), "GEORGIAN": ("Georgian", "ka"), "ARMENIAN": ("Armenian", "hy"),
+    "BENGALI": ("Bengali", "bn"), "TAMIL": ("Tamil", "ta"), "ETHIOPIC": ("Ethiopic", "am"),
+}
+
+
+def script_of(word: str) -> Optional[str]:
+    """The Unicode script name (first word of the letters' names) of a word's first non-Latin letter.
+
+    Examples
+    --------
+    >>> script_of("привет"), script_of("héllo"), script_of("经")
+    ('CYRILLIC', None, 'CJK')
+    """
+    for ch in word:
+        if unicodedata.category(ch).startswith("L"):
+            script = unicodedata.name(ch, "UNKNOWN").split(" ")[0]
+            if script != "LATIN":
+                return script
+    return None
+
+
+def check_english_script(text: str, words: Sequence[str], *, path: Optional[str] = None) -> None:
+    """Refuse or warn about transcript words in scripts the English aligner cannot read.
+
+    The English transcript is folded to Latin letters (:func:`~lipsync.speech.text.normalise_transcript`),
+    which drops every word written in another script. A transcript none of whose words
+    survive would be silently replaced by recognised English words, so it is refused; a
+    few such words among English ones are named in a warning.
+
+    Raises
+    ------
+    lipsync.errors.InputError
+        No word is left: the message names the script and a ``--lang`` to pass.
+
+    Warns
+    -----
+    UnreadWordsWarning
+        Some words were left out (named, with the ``--lang`` to pass).
+
+    Examples
+    --------
+    >>> check_english_script("привет мир", [])
+    Traceback (most recent call last):
+    ...
+    lipsync.errors.InputError: the transcript is written in Cyrillic letters, which the English aligner cannot read: pass the language, for example --lang ru
+    """
+    unread = [t for t in text.split() if script_of(t)]
+    if not unread:
+        return
+    script, suggestion = _SCRIPTS.get(script_of(unread[0]), (script_of(unread[0]).title(), "CODE"))
+    if not words:
+        raise InputError(f"the transcript is written in {script} letters, which the English aligner cannot read: "
+                         f"pass the language, for example --lang {suggestion}", path=path)
+    shown = ", ".join(unread[:8]) + (f" and {len(unread) - 8} more" if len(unread) > 8 else "")
+    warnings.warn(f"{path or 'transcript'}: {len(unread)} word(s) in {script} letters cannot be read by the "
+                  f"English aligner and were left out ({shown}); pass the language, for example --lang "
+                  f"{suggestion}", UnreadWordsWarning, stacklevel=3)
+
+
+def check_transcript(text: str, lang: Optional[str] = None, *, path: Optional[str] = None) -> None:
+    """Refuse a transcript none of whose words ``lang`` can read, before any long work.
+
+    English: :func:`check_english_script`; other languages: the words espeak-ng reads in
+    the language (:func:`lipsync.phonetics.g2p.transcribe`).
+
+    Raises
+    ------
+    lipsync.errors.InputError
+        No word can be read (the message names the script or the words, and ``--lang``).
+
+    Examples
+    --------
+    >>> check_transcript("Hello there")
+    >>> check_transcript("经广州日报报道", None, path="clip.txt")
+    Traceback (most recent call last):
+    ...
+    lipsync.errors.InputError: clip.txt: the transcript is written in Chinese (Han) letters, which the English aligner cannot read: pass the language, for example --lang zh
+    """
+    from ..phonetics.g2p import is_english
+
+    if is_english(lang):
+        from .text import normalise_transcript
+
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", UnreadWordsWarning)  # warned when aligned
+            check_english_script(text, normalise_transcript(text), path=path)
+        return
+    from ..phonetics.g2p import languages, resolve, transcribe
+
+    words = transcribe(text, lang)
+    if words and not any(w.read and w.phones for w in words):
+        raise InputError(f"none of the transcript's words can be read as {languages()[resolve(lang)]} (--lang {lang}): "
+                         f"{', '.join(w.text for w in words[:8])}", path=path)
+
+
+# --- IPA segments to en-us acoustic units and back -------------------------------------------
+
+def _units(phone: str) -> Tuple[str, ...]:
+    """The en-us ARPAbet acoustic units standing for one IPA segment: the closest by
+    features (open a as AA, by sound: the phonetics room's overrides), an affricate or
+    diphthong English lacks as two or three."""
+    from ..phonetics import english_phones
+
+    return tuple(english_phones(phone)) or ("AH",)
+
+
+def _ipa_of_unit(unit: str) -> str:
+    """An ARPAbet phone (stress digit allowed) written in IPA."""
+    from ..phonetics import to_ipa
+
+    return to_ipa(unit.rstrip("012"), "arpabet") or unit
+
+
+def _name(text: str, units: Sequence[str]) -> str:
+    digest = hashlib.sha1(f"{text}|{' '.join(units)}".encode("utf-8")).hexdigest()[:12]
+    return f"ipa_{digest}"
+
+
+def align_language(pcm, text: Optional[str], lang: str, *, quiet: bool = True, path: Optional[str] = None,
+                   jobs: Optional[int] = None):
+    """Words and IPA phones of speech in ``lang`` (any language espeak-ng speaks but English).
+
+    Parameters
+    ----------
+    pcm : numpy.ndarray
+        16 kHz mono samples (int16, or floats in -1..1).
+    text : str, optional
+        The transcript as written; None or blank: the free phone loop listens.
+    lang : str
+        BCP 47 tag (:func:`lipsync.phonetics.g2p.resolve`).
+    quiet, path, jobs
+        As for :func:`lipsync.speech.align.align_samples`.
+
+    Returns
+    -------
+    lipsync.speech.align.Alignment
+        ``words`` as written in the transcript; ``phones`` in IPA. Without a transcript,
+        no words and the loop's phones.
+
+    Raises
+    ------
+    lipsync.errors.InputError
+        An unknown ``lang``, the optional espeak-ng extra missing, or a transcript none of
+        whose words can be read in the language.
+
+    Warns
+    -----
+    UnreadWordsWarning
+        Words the language cannot read (left out, named).
+    lipsync.speech.align.AlignmentWarning
+        The transcript does not fit the audio (as for English).
+
+    Examples
+    --------
+    >>> from lipsync.phonetics.g2p import espeak_available
+    >>> if espeak_available():
+    ...     al = align_language(np.zeros(16000, np.int16), None, "es")
+    ...     print(al.words.labels(), al.recognised)
+    ... else:
+    ...     print([], True)
+    [] True
+    """
+    from ..phonetics.g2p import languages, resolve, transcribe
+    from . import align as A
+
+    code = resolve(lang)
+    pcm = A._as_pcm(pcm)
+    words = transcribe(text, code) if text is not None and text.strip() else []
+    unread = [w.text for w in words if not (w.read and w.phones)]
+    read = [w for w in words if w.read and w.phones]
+    if words and not read:
+        raise InputError(f"none of the transcript's words can be read as {languages()[code]} (--lang {lang}): "
+                         f"{', '.join(unread[:8])}", path=path)
+    if unread:
+        warnings.warn(f"{path or 'transcript'}: {len(unread)} word(s) cannot be read as {languages()[code]} and "
+                      f"were left out: {', '.join(unread[:8])}", UnreadWordsWarning, stacklevel=3)
+    plans: Dict[str, Tuple[str, Tuple[str, ...], List[int]]] = {}
+    names: List[str] = []
+    for w in read:
+        per_phone = [_units(p) for p in w.phones]
+        flat = tuple(u for us in per_phone for u in us)
+        name = _name(w.text, flat)
+        A._CUSTOM[name] = flat
+        plans[name] = (w.text, w.phones, [len(us) for us in per_phone])
+        names.append(name)
+
+    def shown(n: str) -> str:
+        return plans[n][0] if n in plans else n
+
+    token = A._WIDE.set(True)
+    try:
+        al = A._align_pcm(pcm, tuple(names), quiet=quiet, path=path, jobs=jobs, recogniser="loop", shown=shown)
+    finally:
+        A._WIDE.reset(token)
+    return _in_ipa(al, plans, unread)
+
+
+def _in_ipa(al, plans, unread: Sequence[str]):
+    """The alignment with the transcript's own words and their IPA phones (loop phones in IPA)."""
+    from dataclasses import replace
+
+    from .align import _timeline
+
+    phones = list(al.phones)
+    out_words: List[Segment] = []
+    out_phones: List[Segment] = []
+    i = 0
+    for w in al.words:
+        inside = []
+        while i < len(phones) and phones[i].start < w.end - 1e-9:
+            if phones[i].end > w.start + 1e-9:
+                inside.append(phones[i])
+            else:
+                out_phones.append(Segment(phones[i].start, phones[i].end, _ipa_of_unit(phones[i].label)))
+            i += 1
+        plan = plans.get(w.label)
+        if plan is None:  # a loop phone (no words without a transcript)
+            out_phones += [Segment(p.start, p.end, _ipa_of_unit(p.label)) for p in inside]
+            continue
+        text, ipa, counts = plan
+        out_words.append(Segment(w.start, w.end, text))
+        if len(inside) == sum(counts):
+            k = 0
+            for seg, n in zip(ipa, counts):
+                part = inside[k:k + n]
+                k += n
+                if part:
+                    out_phones.append(Segment(part[0].start, part[-1].end, seg))
+        else:  # the phone pass gave another count: each unit in IPA
+            out_phones += [Segment(p.start, p.end, _ipa_of_unit(p.label)) for p in inside]
+    out_phones += [Segment(p.start, p.end, _ipa_of_unit(p.label)) for p in phones[i:]]
+    path = al.words.path
+    return replace(al, words=_timeline(out_words, al.duration, path), phones=_timeline(out_phones, al.duration, path),
+                   transcript=tuple(plans[n][0] if n in plans else n for n in al.transcript if n),
+                   skipped=tuple(unread) + tuple(plans[n][0] if n in plans else n for n in al.skipped))
