@@ -175,7 +175,8 @@ def render_clip(timeline, output: PathLike, *, bank=None, audio: Optional[PathLi
                 fps: float = DEFAULT_FPS, map=None, method: str = "flow", timing=None,
                 format: Optional[str] = None, crf: int = DEFAULT_CRF, preset: str = DEFAULT_PRESET,
                 store=None, jobs: Optional[int] = None, quiet: bool = False,
-                timeline_options=None, progress=None, background=None, composite=None) -> ClipReport:
+                timeline_options=None, progress=None, background=None, composite=None,
+                live=None) -> ClipReport:
     """Render one clip to ``output`` (a video, an animation, or a folder of numbered PNGs).
 
     Parameters
@@ -216,6 +217,10 @@ def render_clip(timeline, output: PathLike, *, bank=None, audio: Optional[PathLi
     composite : lipsync.composite.Composite or False, optional
         The body the mouth is drawn on (default: the bank's ``composite:``); False renders
         the mouth alone.
+    live : float or True, optional
+        Render what a live session fed the audio in real time shows
+        (:func:`lipsync.live.offline.live_specs`; ``timeline`` must be audio): the audio
+        look-ahead in seconds, or True for the default.
 
     Returns
     -------
@@ -260,8 +265,14 @@ def render_clip(timeline, output: PathLike, *, bank=None, audio: Optional[PathLi
 
         if is_audio_input(timeline, getattr(timeline_options, "timeline_format", None)):
             audio = timeline  # speech in: its own sound is the soundtrack
-    anim = Animator(bank, timeline, fps=fps, map=map, method=method, timing=timing, store=store,
-                    timeline_options=timeline_options)
+    if live is not None:
+        from .live.offline import LiveClip
+
+        anim = LiveClip(bank, timeline, fps=fps, lookahead=None if live is True else live, map=map,
+                        method=method, timing=timing, store=store, quiet=quiet)
+    else:
+        anim = Animator(bank, timeline, fps=fps, map=map, method=method, timing=timing, store=store,
+                        timeline_options=timeline_options)
     n = len(anim)
     if n == 0:  # a video needs a frame; a timeline of no length has none to show (README: Rendering)
         where = getattr(timeline, "path", None) if hasattr(timeline, "segments") else os.fspath(timeline)

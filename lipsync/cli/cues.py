@@ -42,6 +42,7 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                              f"default) and of atlas frames (default: {DEFAULT_RENDER_FPS:g}, as lipsync render)")
     parser.add_argument("--atlas", default=None, metavar="ATLAS.json",
                         help="for --format atlas: the atlas (from `lipsync atlas`) whose cells the frames name")
+    add_live_options(parser)
     parser.add_argument("--tier-name", default=DEFAULT_TIER, metavar="NAME",
                         help=f"TextGrid tier name (default: {DEFAULT_TIER})")
     add_bank_option(parser)
@@ -66,6 +67,8 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(f"--fps {args.fps:g} is outside {FPS_RANGE[0]:g}..{FPS_RANGE[1]:g}")
     if os.path.isdir(args.output):
         raise InputError("is a folder; give a file name for the cues", path=args.output)
+    if getattr(args, "live", False):
+        return _live_cues(args, name, float(DEFAULT_RENDER_FPS if args.fps is None else args.fps))
     if WRITERS.get(name).name == "atlas":
         return _atlas_frames(args, fps)
     if args.atlas is not None:
@@ -137,3 +140,54 @@ def _bank_track(args: argparse.Namespace, base):
     timeline, pmap = load_viseme_timeline(args, rest=bank.rest, viseme_names=bank.names)
     names, _ = resolve_visemes(base, bank.names)
     return timeline, pmap, {b: m for m, b in names.items()}, bank.rest
+
+
+def _live_cues(args: argparse.Namespace, name: str, fps: float) -> int:
+    """``--live``: the mouth shapes a live session fed the audio in real time shows, frame by frame."""
+    from .._data import default_bank_dir
+    from ..bank import Bank
+    from ..errors import InputError
+    from ..live.offline import live_cues, live_specs
+    from ..phonemes import DEFAULT_MAP, load_map, resolve_visemes
+
+    if WRITERS.get(name).name == "atlas" or args.atlas is not None:
+        raise InputError("--live writes mouth cues; --format atlas is for timelines")
+    bank = Bank.load(args.bank or default_bank_dir())
+    base = load_map(args.map or DEFAULT_MAP)
+    specs = live_specs(args.timeline, bank, fps=fps, lookahead=_lookahead(args), map=args.map,
+                       timing=args.timing, quiet=args.quiet)
+    names, _ = resolve_visemes(base, bank.names)
+    to_map = {b: m for m, b in names.items()}
+    cues = [(a, b, to_map.get(v, v)) for a, b, v in live_cues(specs, fps)]
+    write_names: Dict[str, str] = {}
+    if WRITERS.get(name).name == "moho":
+        write_names = {v: aliases[0] for v, aliases in base.aliases.items() if aliases}
+    from ..writers import write_cues
+
+    write_cues(cues, args.output, name, rest=to_map.get(bank.rest, bank.rest), fps=fps, tier=args.tier_name,
+               sound_file=os.path.abspath(args.timeline), names=write_names,
+               closures=[to_map.get(c, c) for c in base.closures], duration=len(specs) / fps)
+    if not args.quiet:
+        print(f"lipsync: wrote {len(cues)} live cues ({WRITERS.get(name).name}) to {args.output}", file=sys.stderr)
+    return 0
+
+
+def add_live_options(parser: argparse.ArgumentParser) -> None:
+    """``--live`` and ``--lookahead MS`` (render and cues)."""
+    parser.add_argument("--live", action="store_true",
+                        help="audio input: what a live session fed it in real-time 20 ms chunks shows "
+                             "(lipsync serve, LiveAnimator.feed_audio): causal, no transcript")
+    parser.add_argument("--lookahead", type=float, default=None, metavar="MS",
+                        help="with --live: audio past a frame's time it is made with, in ms (default: 200)")
+
+
+def _lookahead(args: argparse.Namespace):
+    from ..errors import InputError, check_number
+
+    ms = getattr(args, "lookahead", None)
+    if ms is None:
+        return None
+    if not getattr(args, "live", False):
+        raise InputError("--lookahead goes with --live")
+    check_number(ms, "--lookahead", 0, 1000)
+    return ms / 1000.0

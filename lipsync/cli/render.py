@@ -49,6 +49,9 @@ def add_parser(sub) -> None:
     add_jobs_option(p)
     add_quiet_option(p)
     add_timeline_options(p)
+    from .cues import add_live_options
+
+    add_live_options(p)
     p.set_defaults(func=run)
 
 
@@ -67,7 +70,13 @@ def run(args: argparse.Namespace) -> int:
     bank = Bank.load(args.bank or default_bank_dir())
     composite = False if args.mouth_only else \
         composite_from_options(bank.composite, over=args.over, at=args.at, scale=args.scale)
-    report = render_clip(args.timeline, args.output, bank=bank, audio=args.audio, fps=args.fps,
+    from .cues import _lookahead
+
+    lookahead = _lookahead(args)      # --lookahead without --live is refused here
+    live = (True if lookahead is None else lookahead) if args.live else None
+    if args.live and args.text is not None:
+        raise InputError("--live hears the audio alone, as a live session does: leave out --text")
+    report = render_clip(args.timeline, args.output, bank=bank, audio=args.audio, fps=args.fps, live=live,
                          map=args.map, method=args.method, timing=args.timing, format=args.format,
                          crf=args.crf, preset=args.preset, store=args.store, jobs=args.jobs,
                          quiet=args.quiet, timeline_options=args, background=background, composite=composite)
