@@ -155,11 +155,12 @@ class LiveSession:
             self.wake.set()
         elif isinstance(msg, protocol.Config):
             started = self.live is not None and (self.live.horizon > 0 or self.audio_started is not None)
+            prepare = renew = False
             if msg.audio_rate is not None and msg.audio_rate != self.audio_rate:
                 if self.audio_started is not None:
                     raise protocol.ProtocolError("config: audio_rate can only be set before the first audio")
                 self.audio_rate = msg.audio_rate
-            renew = False
+                prepare = renew = True     # a recogniser made for another rate is replaced
             if msg.lookahead is not None and msg.lookahead != self._animator().audio_lookahead:
                 if started:
                     raise protocol.ProtocolError("config: lookahead can only change before the first push or audio")
@@ -171,6 +172,10 @@ class LiveSession:
             if renew:
                 self.live = None
                 self._animator()
+            if prepare or (renew and self.audio_rate is not None):
+                # load the recogniser now (~0.5 s), not when the first audio is due
+                await asyncio.get_running_loop().run_in_executor(
+                    self.server.executor, self.live.feed_audio, np.zeros(0, np.int16), self.audio_rate)
             self.format = msg.format or self.format
             self.quality = msg.quality or self.quality
             if msg.specs is not None:
