@@ -67,6 +67,7 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(f"--fps {args.fps:g} is outside {FPS_RANGE[0]:g}..{FPS_RANGE[1]:g}")
     if os.path.isdir(args.output):
         raise InputError("is a folder; give a file name for the cues", path=args.output)
+    _lookahead(args)  # --lookahead without --live is refused before any work
     if getattr(args, "live", False):
         return _live_cues(args, name, float(DEFAULT_RENDER_FPS if args.fps is None else args.fps))
     if WRITERS.get(name).name == "atlas":
