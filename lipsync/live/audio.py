@@ -71,6 +71,10 @@ FLOOR_RISE_DB = 0.01
 #: Frames quieter than this are digital silence (editors' and synthesisers' zeros, a
 #: recording's first samples): not a noise floor, which would make any noise look loud.
 DIGITAL_SILENCE_DBFS = -70.0
+#: The floor before any sound: a quiet room. Speech that starts the stream (a TTS's first
+#: word) is then loud against it; a noisier room lowers nothing but is found within a
+#: second as the floor falls to its quietest frames.
+INITIAL_FLOOR_DBFS = -60.0
 #: Consecutive voiced frames that make a voice (50 ms: a vowel's length): one to four periodic
 #: frames are clicks, lip smacks and the odd periodic stretch of room noise. Measured, mouth
 #: shapes of the phone loop against the transcript-aligned track (frames agreeing, toon bank):
@@ -204,7 +208,7 @@ class VoiceGate:
         wac = np.fft.irfft(np.abs(np.fft.rfft(self._window, self.nfft)) ** 2, self.nfft)
         self._wac = np.maximum(wac / wac[0], 1e-3)
         self.hist = np.zeros(self.win, np.float64)  # the last window of samples
-        self.floor: Optional[float] = None
+        self.floor = INITIAL_FLOOR_DBFS
         self.voiced: List[bool] = []                # per frame: a voiced frame
         self._run = 0
         self.core: List[bool] = []                  # per frame: part of a voice (>= MIN_VOICED_FRAMES run)
@@ -237,8 +241,8 @@ class VoiceGate:
         db = 10 * np.log10(np.mean(frames * frames, axis=1) + 1e-12)
         for e, p in zip(db.tolist(), period.tolist()):
             if e >= DIGITAL_SILENCE_DBFS:
-                self.floor = e if self.floor is None or e < self.floor else self.floor + FLOOR_RISE_DB
-            v = self.floor is not None and p >= VOICED_PERIODICITY and e >= VOICED_MIN_DBFS \
+                self.floor = e if e < self.floor else self.floor + FLOOR_RISE_DB
+            v = p >= VOICED_PERIODICITY and e >= VOICED_MIN_DBFS \
                 and e >= self.floor + VOICED_ABOVE_FLOOR_DB
             self.voiced.append(v)
             self._run = self._run + 1 if v else 0
