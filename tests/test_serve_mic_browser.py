@@ -17,8 +17,6 @@ test-browser`` runs the browser tests).
 
 from __future__ import annotations
 
-import shutil
-import tempfile
 import time
 import wave
 from pathlib import Path
@@ -30,8 +28,8 @@ from lipsync.live import LiveAnimator
 from lipsync.live.offline import live_specs
 from lipsync.speech.audio import load_audio
 
-CHROMIUM = Path("/usr/bin/chromium")
-DRIVER = Path("/usr/bin/chromedriver")
+from test_serve_browser import CHROMIUM, DRIVER
+
 CLIP = Path(__file__).resolve().parent / "data" / "grid-s1-audio" / "lray6p.flac"
 
 pytestmark = pytest.mark.skipif(not (CHROMIUM.exists() and DRIVER.exists()),
@@ -61,22 +59,11 @@ def recording(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def browser(recording):
-    from selenium import webdriver
-    from selenium.webdriver.chrome.service import Service
+    from test_serve_browser import chromium
 
-    profile = tempfile.mkdtemp(prefix="lipsync-chromium-")
-    options = webdriver.ChromeOptions()
-    options.binary_location = str(CHROMIUM)
-    for flag in ("--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
-                 "--disable-background-networking", "--disable-component-update", "--disable-sync",
-                 "--use-fake-device-for-media-stream", "--use-fake-ui-for-media-stream",
-                 f"--use-file-for-fake-audio-capture={recording[0]}", "--autoplay-policy=no-user-gesture-required",
-                 f"--user-data-dir={profile}", "--window-size=800,900"):
-        options.add_argument(flag)
-    driver = webdriver.Chrome(service=Service(str(DRIVER)), options=options)
-    yield driver
-    driver.quit()
-    shutil.rmtree(profile, ignore_errors=True)
+    yield from chromium(("--use-fake-device-for-media-stream", "--use-fake-ui-for-media-stream",
+                         f"--use-file-for-fake-audio-capture={recording[0]}",
+                         "--autoplay-policy=no-user-gesture-required"))
 
 
 @pytest.fixture(scope="module")
