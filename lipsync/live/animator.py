@@ -110,6 +110,14 @@ class LiveAnimator:
     prepare : bool
         Compute missing flows now (all pairs) so that no frame waits for one; default True
         for the ``flow`` and ``splat`` methods.
+    audio_lookahead : float, optional
+        For :meth:`feed_audio`: the frame of time ``t`` is fixed when the audio reaches
+        ``t + audio_lookahead`` (default :data:`AUDIO_LOOKAHEAD_S`, 0.2 s; 0 to 1 s).
+    events_at : {"start", "end"}
+        When pushed events arrive: as each sound starts (its end known: TTS events,
+        timelines) or as it ends (a recogniser's output). Only :attr:`delay` depends on it.
+    longest_event : float
+        With ``events_at="end"``: the longest event expected, seconds (default 0.3).
 
     Notes
     -----
@@ -118,6 +126,9 @@ class LiveAnimator:
     what has been pushed; when the clock passes the data the head holds the last shape up
     to the end of the data, then relaxes to rest as a timeline's end does. When everything
     is pushed before the first frame, every frame equals the offline Animator's.
+
+    Audio (:meth:`feed_audio`) may be fed instead of, or beside, events (events win where
+    both exist); docs/live.md has the delays each input needs.
     """
 
     def __init__(self, bank: Union[Bank, str, "os.PathLike[str]"], fps: float = DEFAULT_FPS, *,
