@@ -22,6 +22,7 @@ from typing import Dict
 from ..frames import DEFAULT_FPS as DEFAULT_RENDER_FPS
 from ..writers import DEFAULT_FPS, DEFAULT_TIER, WRITERS
 from ._common import add_bank_option, add_quiet_option, add_timeline_options, load_viseme_timeline
+from ._live import add_live_options, lookahead_seconds as _lookahead
 
 
 def add_parser(subparsers) -> argparse.ArgumentParser:
@@ -171,24 +172,3 @@ def _live_cues(args: argparse.Namespace, name: str, fps: float) -> int:
     if not args.quiet:
         print(f"lipsync: wrote {len(cues)} live cues ({WRITERS.get(name).name}) to {args.output}", file=sys.stderr)
     return 0
-
-
-def add_live_options(parser: argparse.ArgumentParser) -> None:
-    """``--live`` and ``--lookahead MS`` (render and cues)."""
-    parser.add_argument("--live", action="store_true",
-                        help="audio input: what a live session fed it in real-time 20 ms chunks shows "
-                             "(lipsync serve, LiveAnimator.feed_audio): causal, no transcript")
-    parser.add_argument("--lookahead", type=float, default=None, metavar="MS",
-                        help="with --live: audio past a frame's time it is made with, in ms (default: 200)")
-
-
-def _lookahead(args: argparse.Namespace):
-    from ..errors import InputError, check_number
-
-    ms = getattr(args, "lookahead", None)
-    if ms is None:
-        return None
-    if not getattr(args, "live", False):
-        raise InputError("--lookahead goes with --live")
-    check_number(ms, "--lookahead", 0, 1000)
-    return ms / 1000.0

@@ -9,6 +9,7 @@ from ..clip import DEFAULT_CRF, DEFAULT_FPS, DEFAULT_PRESET
 from ..encode import ENCODERS
 from ..render import METHODS
 from ._common import add_bank_option, add_jobs_option, add_quiet_option, add_store_option, add_timeline_options
+from ._live import add_live_options, lookahead_seconds
 
 
 def add_parser(sub) -> None:
@@ -49,8 +50,6 @@ def add_parser(sub) -> None:
     add_jobs_option(p)
     add_quiet_option(p)
     add_timeline_options(p)
-    from .cues import add_live_options
-
     add_live_options(p)
     p.set_defaults(func=run)
 
@@ -70,9 +69,7 @@ def run(args: argparse.Namespace) -> int:
     bank = Bank.load(args.bank or default_bank_dir())
     composite = False if args.mouth_only else \
         composite_from_options(bank.composite, over=args.over, at=args.at, scale=args.scale)
-    from .cues import _lookahead
-
-    lookahead = _lookahead(args)      # --lookahead without --live is refused here
+    lookahead = lookahead_seconds(args)      # --lookahead without --live is refused here
     live = (True if lookahead is None else lookahead) if args.live else None
     if args.live and args.text is not None:
         raise InputError("--live hears the audio alone, as a live session does: leave out --text")
