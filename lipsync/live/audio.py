@@ -38,6 +38,7 @@ from typing import List, Optional, Tuple
 import numpy as np
 
 from ..errors import InputError
+from ..speech.align import DITHER_STEPS
 
 #: The recogniser's rate (pocketsphinx's en-us acoustic model).
 RATE = 16000
@@ -103,6 +104,15 @@ NON_SPEECH = frozenset({"SIL", "+NSN+", "+SPN+", "+BREATH+", "+NOISE+", "+UH+", 
 #: Recogniser settings: topn 4 (pocketsphinx's default, the fastest; the aligner's 8 buys
 #: boundary precision for forced alignment, not phone choice in a free loop).
 RECOGNISER_SETTINGS = dict(topn=4)
+
+
+def _dither(pcm: np.ndarray, block: int) -> np.ndarray:
+    """Block ``block`` with the aligner's dither added (:data:`lipsync.speech.align.DITHER_STEPS`:
+    digital silence has no spectrum, and its log(0) features derail pocketsphinx's noise
+    removal and mean normalisation), seeded by the block's number so that the stream's
+    samples alone decide it."""
+    noise = np.random.default_rng(block).integers(-DITHER_STEPS, DITHER_STEPS + 1, len(pcm), dtype=np.int32)
+    return np.clip(pcm.astype(np.int32) + noise, -32768, 32767).astype(np.int16)
 
 
 def as_int16(samples, *, what: str = "audio") -> np.ndarray:
@@ -401,7 +411,7 @@ class AudioFrontEnd:
 
     def _block(self, pcm: np.ndarray) -> None:
         self.gate.feed(pcm)
-        self.rec.feed(pcm)
+        self.rec.feed(_dither(pcm, self.blocks))
         self.blocks += 1
         f = self.frames
         # restart the phone loop's utterance in a long enough pause (module constants)
@@ -474,7 +484,8 @@ def offline_phones(pcm: np.ndarray) -> List[Tuple[int, int, str]]:
     fe.gate.feed(pcm[:n])
     fe.blocks = n // BLOCK
     d = fe.rec.d
-    d.process_raw(np.ascontiguousarray(pcm[:n]).tobytes(), False, True)
+    blocks = [_dither(pcm[i:i + BLOCK], i // BLOCK) for i in range(0, n, BLOCK)]
+    d.process_raw(np.ascontiguousarray(np.concatenate(blocks) if blocks else pcm[:0]).tobytes(), False, True)
     fe.rec.frames = fe.frames
     fe.rec.restart()
     fe.close()
