@@ -168,7 +168,7 @@ def test_a_real_pause_rests_and_speech_opens(bank, clip):
 # ---------------------------------------------------------------------------- against offline
 
 #: Live (200 ms look-ahead) against the phone loop over the whole file, share of frames with
-#: the same mouth shape, mean of the four GRID sentences in tests/data. Measured 0.85 (0.75-0.92).
+#: the same mouth shape, mean of the four GRID sentences in tests/data. Measured 0.867 (0.77-0.92).
 MIN_LIVE_VS_OFFLINE = 0.8
 
 
