@@ -176,7 +176,7 @@ def render_clip(timeline, output: PathLike, *, bank=None, audio: Optional[PathLi
                 format: Optional[str] = None, crf: int = DEFAULT_CRF, preset: str = DEFAULT_PRESET,
                 store=None, jobs: Optional[int] = None, quiet: bool = False,
                 timeline_options=None, progress=None, background=None, composite=None,
-                lang: Optional[str] = None) -> ClipReport:
+                lang: Optional[str] = None, live=None) -> ClipReport:
     """Render one clip to ``output`` (a video, an animation, or a folder of numbered PNGs).
 
     Parameters
@@ -220,6 +220,10 @@ def render_clip(timeline, output: PathLike, *, bank=None, audio: Optional[PathLi
     lang : str, optional
         Language of audio input and its transcript (BCP 47; default English): see
         :func:`lipsync.speech.align.align`. Overrides ``timeline_options.lang``.
+    live : float or True, optional
+        Render what a live session fed the audio in real time shows
+        (:func:`lipsync.live.offline.live_specs`; ``timeline`` must be audio): the audio
+        look-ahead in seconds, or True for the default.
 
     Returns
     -------
@@ -269,8 +273,14 @@ def render_clip(timeline, output: PathLike, *, bank=None, audio: Optional[PathLi
 
         if is_audio_input(timeline, getattr(timeline_options, "timeline_format", None)):
             audio = timeline  # speech in: its own sound is the soundtrack
-    anim = Animator(bank, timeline, fps=fps, map=map, method=method, timing=timing, store=store,
-                    timeline_options=timeline_options)
+    if live is not None:
+        from .live.offline import LiveClip
+
+        anim = LiveClip(bank, timeline, fps=fps, lookahead=None if live is True else live, map=map,
+                        method=method, timing=timing, store=store, quiet=quiet)
+    else:
+        anim = Animator(bank, timeline, fps=fps, map=map, method=method, timing=timing, store=store,
+                        timeline_options=timeline_options)
     n = len(anim)
     if n == 0:  # a video needs a frame; a timeline of no length has none to show (README: Rendering)
         where = getattr(timeline, "path", None) if hasattr(timeline, "segments") else os.fspath(timeline)

@@ -21,8 +21,9 @@ pytestmark = pytest.mark.skipif(not (CHROMIUM.exists() and DRIVER.exists()),
                                 reason="Debian chromium and chromium-driver are not installed")
 
 
-@pytest.fixture(scope="module")
-def browser():
+def chromium(extra=()):
+    """Headless Chromium through chromedriver with a fresh profile; yields the driver, then
+    quits it and removes the profile (``extra``: more command-line flags)."""
     from selenium import webdriver
     from selenium.webdriver.chrome.service import Service
 
@@ -31,12 +32,17 @@ def browser():
     options.binary_location = str(CHROMIUM)
     for flag in ("--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
                  "--disable-background-networking", "--disable-component-update", "--disable-sync",
-                 f"--user-data-dir={profile}", "--window-size=800,900"):
+                 f"--user-data-dir={profile}", "--window-size=800,900", *extra):
         options.add_argument(flag)
     driver = webdriver.Chrome(service=Service(str(DRIVER)), options=options)
     yield driver
     driver.quit()
     shutil.rmtree(profile, ignore_errors=True)
+
+
+@pytest.fixture(scope="module")
+def browser():
+    yield from chromium()
 
 
 @pytest.fixture(scope="module")

@@ -15,6 +15,7 @@
 
 from __future__ import annotations
 
+import os
 import statistics
 import time
 import warnings
@@ -191,3 +192,316 @@ def _fps(ctx: Context, rows: List[dict]) -> None:
 
     if (ctx.mfa / "acoustic_corpus.TextGrid").exists():
         bench_fps(rows, ctx, _toon_banks(ctx))
+
+
+# --- audio in (issue 30): lipsync.live.audio, LiveAnimator.feed_audio ------------------------
+#
+# ``python -m lipsync.bench --only live_audio_shapes --only live_audio_lips --only live_audio_speed
+# --only live_audio_sessions --only live_events_delay`` (each runnable alone). Timings are wall
+# and CPU time on whatever else the machine runs: compare the ratios printed side by side.
+
+#: Look-aheads of the trade-off curve, seconds.
+AUDIO_LOOKAHEADS = (0.0, 0.06, 0.1, 0.14, 0.2, 0.3, 0.4)
+
+
+def _shape_track(specs) -> np.ndarray:
+    """Each frame's nearer viseme (what a viewer reads as the mouth shape)."""
+    return np.array([s.from_viseme if s.alpha < 0.5 else s.to_viseme for s in specs], dtype=object)
+
+
+def _offline_loop_specs(bank, pcm, n: int, timing=None):
+    """Offline without a transcript: the same phone loop and gate over the whole file, then
+    the offline sequencer (:class:`lipsync.Animator`)."""
+    from ..animator import Animator
+    from ..live.audio import offline_phones
+    from ..timeline import PHONEME, Segment, Timeline
+
+    dur = len(pcm) / 16000
+    runs = offline_phones(pcm)
+    tl = Timeline(tuple(Segment(a / 100, b / 100, p) for a, b, p in runs), kind=PHONEME, stated_end=dur)
+    return Animator(bank, tl, fps=25, timing=timing).specs[:n]
+
+
+def _recordings(ctx: Context, count: int):
+    """(name, 16 kHz samples, transcript-aligned phones) of the MFA recording and GRID clips."""
+    from ..readers import read_timeline
+    from ..speech.audio import load_audio
+    from . import grid as G
+
+    out = []
+    wav = ctx.mfa / "acoustic_corpus.wav"
+    if wav.is_file() and (ctx.mfa / "acoustic_corpus.TextGrid").is_file():
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            out.append(("mfa acoustic_corpus", load_audio(wav), read_timeline(ctx.mfa / "acoustic_corpus.TextGrid")))
+    for c in [c for c in G.held_out() if G.video(c).is_file()][:count]:
+        out.append((c, load_audio(G.video(c)), G.alignment_of(c).phones))
+    return out
+
+
+@FIGURES.decorator("live_audio_shapes")
+def _audio_shapes(ctx: Context, rows: List[dict]) -> None:
+    """Mouth shapes against the transcript-aligned track: live at each look-ahead and offline
+    without a transcript (frames showing the same shape, toon bank, its timing)."""
+    from .._data import default_bank_dir
+    from ..animator import Animator
+    from ..bank import Bank
+    from ..live.offline import live_specs
+
+    bank = Bank.load(default_bank_dir())
+    recs = _recordings(ctx, 6 if ctx.quick else 30)
+    per = {"offline": [], **{L: [] for L in AUDIO_LOOKAHEADS}}
+    vs_off = {L: [] for L in AUDIO_LOOKAHEADS}
+    mfa = {}
+    for name, pcm, phones in recs:
+        n = int(np.ceil(len(pcm) / 16000 * 25))
+        ref = _shape_track(Animator(bank, phones.replace(stated_end=max(len(pcm) / 16000, phones.duration)),
+                                    fps=25).specs[:n])
+        off = _shape_track(_offline_loop_specs(bank, pcm, n))
+        score = {"offline": float(np.mean(off == ref))}
+        for L in AUDIO_LOOKAHEADS:
+            live = _shape_track(live_specs(pcm, bank, lookahead=L))
+            score[L] = float(np.mean(live == ref))
+            vs_off[L].append(float(np.mean(live == off)))
+        if name.startswith("mfa"):
+            mfa = score
+        else:
+            for k, v in score.items():
+                per[k].append(v)
+    grid_n = len(per["offline"])
+    for L in AUDIO_LOOKAHEADS:
+        row = {"figure": "live_audio_shapes", "look-ahead ms": round(L * 1000)}
+        if grid_n:
+            row.update({f"GRID ({grid_n}) live": round(statistics.mean(per[L]), 3),
+                        "GRID offline (no transcript)": round(statistics.mean(per["offline"]), 3),
+                        "GRID live - offline, points": round(100 * (statistics.mean(per[L]) - statistics.mean(per["offline"])), 1)})
+        if mfa:
+            row.update({"MFA live": round(mfa[L], 3), "MFA offline": round(mfa["offline"], 3),
+                        "MFA live - offline, points": round(100 * (mfa[L] - mfa["offline"]), 1)})
+        row["live = offline frames (all)"] = round(statistics.mean(vs_off[L]), 3)
+        rows.append(row)
+
+
+@FIGURES.decorator("live_audio_lips")
+def _audio_lips(ctx: Context, rows: List[dict]) -> None:
+    """Lip opening against the real speaker (GRID s1, held-out sentences) with the shipped
+    visemes/grid-s1 bank (its own timing): live (140 and 200 ms) against offline without a
+    transcript, and the transcript-aligned track for reference. r per clip, mean."""
+    from .._data import default_bank_dir
+    from ..animator import Animator
+    from ..bank import Bank
+    from ..coarticulation import predicted
+    from ..live.offline import live_specs
+    from ..speech.audio import load_audio
+    from . import grid as G
+    from .coarticulation import bank_values
+
+    path = default_bank_dir().parent / "grid-s1"
+    held = [c for c in G.held_out() if G.video(c).is_file()][:8 if ctx.quick else 30]
+    if not (path / "bank.yaml").is_file() or not held:
+        rows.append({"figure": "live_audio_lips", "case": "skipped: no visemes/grid-s1 or GRID clips"})
+        return
+    bank = Bank.load(path)
+    values = bank_values(bank)
+    r = {"live 140 ms": [], "live 200 ms": [], "offline, no transcript": [], "offline, transcript": []}
+    for c in held:
+        real = G.real_measures(c)["opening"]
+        n = len(real)
+        pcm = load_audio(G.video(c))
+        aligned = G.alignment_of(c).phones
+        specs = {"live 140 ms": live_specs(pcm, bank, lookahead=0.14)[:n],
+                 "live 200 ms": live_specs(pcm, bank, lookahead=0.2)[:n],
+                 "offline, no transcript": _offline_loop_specs(bank, pcm, n),
+                 "offline, transcript": Animator(bank, aligned.replace(stated_end=max(n / 25, aligned.duration)),
+                                                 fps=25).specs[:n]}
+        for k, s in specs.items():
+            m = min(len(s), n)
+            r[k].append(G.correlation(predicted(s[:m], values), real[:m]))
+    base = statistics.mean(r["offline, no transcript"])
+    for k, v in r.items():
+        rows.append({"figure": "live_audio_lips", "track": k, "clips": len(v),
+                     "lip-opening r (mean)": round(statistics.mean(v), 3),
+                     "minus offline no transcript": round(statistics.mean(v) - base, 3)})
+
+
+def _session_costs(bank, pcm, *, render: bool, pool=None):
+    """Feed ``pcm`` in 20 ms chunks as fast as possible; per chunk the wall time from its
+    last sample to its frames being ready (fed, and rendered + JPEG-encoded when ``render``);
+    and the CPU seconds of this thread."""
+    import cv2
+
+    from ..live import LiveAnimator
+
+    live = LiveAnimator(bank, fps=25, renderer=pool, prepare=False)
+    out = np.empty(live.shape + (live.renderer.channels,), np.uint8)
+    live.feed_audio(np.zeros(0, np.int16), 16000)     # the recogniser loaded (a session's config)
+    lat = []
+    cpu = time.thread_time()
+    for i in range(0, len(pcm), 320):
+        t = time.perf_counter()
+        for n in live.feed_audio(pcm[i:i + 320], 16000):
+            if render:
+                live.frame(n, out=out)
+                cv2.imencode(".jpg", out, [cv2.IMWRITE_JPEG_QUALITY, 80])
+        lat.append(time.perf_counter() - t)
+    return np.array(lat), time.thread_time() - cpu
+
+
+@FIGURES.decorator("live_audio_speed")
+def _audio_speed(ctx: Context, rows: List[dict]) -> None:
+    """One audio session on one core: per-chunk latency and CPU per second of audio."""
+    import cv2
+
+    from .._data import default_bank_dir
+    from ..bank import Bank
+    from ..live import AUDIO_LOOKAHEAD_S, LiveAnimator
+    from ..speech.audio import load_audio
+
+    wav = ctx.mfa / "acoustic_corpus.wav"
+    if not wav.is_file():
+        return
+    pcm = load_audio(wav)
+    if ctx.quick:
+        pcm = pcm[:16000 * 8]
+    seconds = len(pcm) / 16000
+    bank = Bank.load(default_bank_dir())
+    LiveAnimator(bank, fps=25)          # flows ready
+    threads = cv2.getNumThreads()
+    cv2.setNumThreads(1)
+    try:
+        for render in (False, True):
+            lat, cpu = _session_costs(bank, pcm, render=render)
+            per_s = cpu / seconds
+            row = {"figure": "live_audio_speed", "work": "recognise + sequence" + (" + render 512px + JPEG" if render else ""),
+                   "audio s": round(seconds, 1), "chunk p50 ms": round(1000 * float(np.percentile(lat, 50)), 2),
+                   "chunk p95 ms": round(1000 * float(np.percentile(lat, 95)), 2),
+                   "chunk max ms": round(1000 * float(lat.max()), 1),
+                   "CPU s per s of audio": round(per_s, 3),
+                   "end to end p95 ms (look-ahead + chunk + p95)": round(1000 * (AUDIO_LOOKAHEAD_S + 0.02)
+                                                                         + 1000 * float(np.percentile(lat, 95)))}
+            if render:
+                row["sessions one core holds at 25 fps"] = int(1.0 / per_s)
+            rows.append(row)
+    finally:
+        cv2.setNumThreads(threads)
+
+
+#: A frame is on time when it is ready by its audio time plus the look-ahead plus this: the
+#: 20 ms chunk its audio came in and one frame (40 ms at 25 fps) of the player's own timing,
+#: which shows each frame at the first screen refresh after its time anyway.
+DUE_MARGIN_S = 0.06
+
+
+@FIGURES.decorator("live_audio_sessions")
+def _audio_sessions(ctx: Context, rows: List[dict]) -> None:
+    """8 audio sessions at once in real time (threads, as ``lipsync serve`` runs them; a pool
+    of 2 renderers, warm), each frame rendered and JPEG-encoded: is every frame ready when due?
+    The machine's load average is printed beside: other work on the cores delays frames."""
+    import threading
+
+    import cv2
+
+    from .._data import default_bank_dir
+    from ..bank import Bank
+    from ..live import AUDIO_LOOKAHEAD_S, LiveAnimator, RendererPool
+    from ..speech.audio import load_audio
+    from . import grid as G
+
+    clips = [c for c in G.held_out() if G.video(c).is_file()][:8]
+    if len(clips) < 8:
+        rows.append({"figure": "live_audio_sessions", "case": "skipped: fewer than 8 GRID clips"})
+        return
+    bank = Bank.load(default_bank_dir())
+    LiveAnimator(bank, fps=25)
+    pool = RendererPool(bank, size=2)
+    # a server that has run a while has met every viseme pair (a pair's first in-between
+    # frame builds its state: ~100 ms, the live_latency figure's "cold" column)
+    pool.warm([(a, b) for a in bank.names for b in bank.names if a != b])
+    audio = [load_audio(G.video(c)) for c in clips]
+    lives = [LiveAnimator(bank, fps=25, renderer=pool, prepare=False) for _ in clips]
+    for live in lives:
+        live.feed_audio(np.zeros(0, np.int16), 16000)
+    late: List[float] = []
+    frames = [0]
+    lock = threading.Lock()
+    start = time.perf_counter() + 0.5
+
+    def session(live, pcm):
+        out = np.empty(live.shape + (live.renderer.channels,), np.uint8)
+        for k, i in enumerate(range(0, len(pcm), 320)):
+            wait = start + (k + 1) * 0.02 - time.perf_counter()   # chunk k's last sample arrives
+            if wait > 0:
+                time.sleep(wait)
+            for n in live.feed_audio(pcm[i:i + 320], 16000):
+                live.frame(n, out=out)
+                cv2.imencode(".jpg", out, [cv2.IMWRITE_JPEG_QUALITY, 80])
+                ready = time.perf_counter() - start
+                with lock:
+                    late.append(ready - (n / 25 + AUDIO_LOOKAHEAD_S + DUE_MARGIN_S))
+                    frames[0] += 1
+
+    cpu = time.process_time()
+    ths = [threading.Thread(target=session, args=(lv, p)) for lv, p in zip(lives, audio)]
+    for th in ths:
+        th.start()
+    for th in ths:
+        th.join()
+    cpu = time.process_time() - cpu
+    late_a = np.array(late)
+    rows.append({"figure": "live_audio_sessions", "sessions": len(lives), "renderers": pool.size,
+                 "audio s each": round(statistics.mean(len(p) / 16000 for p in audio), 1), "frames": frames[0],
+                 "on time": f"{int((late_a <= 0).sum())}/{len(late_a)}",
+                 "ready after audio, p95 ms": round(1000 * float(np.percentile(late_a + DUE_MARGIN_S, 95)), 1),
+                 "latest vs due ms": round(1000 * float(late_a.max()), 1),
+                 "CPU s per s of audio (all)": round(cpu / sum(len(p) / 16000 for p in audio), 3),
+                 "cores": os.cpu_count(), "load average (1 min)": round(os.getloadavg()[0], 1)})
+
+
+def needed_delays(segments, n_frames: int, lookahead: float, events_at: str, fps: float = 25.0) -> np.ndarray:
+    """Per frame, the least delay behind the newest event's arrival at which the frame is final
+    (the data reaches ``lookahead`` past it) when each event arrives as its sound starts or ends.
+
+    Examples
+    --------
+    >>> needed_delays([(0.0, 0.3, "A"), (0.3, 0.5, "B")], 3, 0.1, "end", fps=10).round(2).tolist()
+    [0.3, 0.2, 0.1]
+    """
+    ends = np.array([e for _, e, _ in segments])
+    arrive = np.array([s for s, _, _ in segments]) if events_at == "start" else ends
+    out = np.full(n_frames, np.inf)
+    for n in range(n_frames):
+        t = n / fps
+        ok = np.nonzero(ends >= t + lookahead - 1e-9)[0]
+        if len(ok):
+            out[n] = max(0.0, arrive[ok].min() - t) if events_at == "start" else arrive[ok[0]] - t
+    return out
+
+
+@FIGURES.decorator("live_events_delay")
+def _events_delay(ctx: Context, rows: List[dict]) -> None:
+    """The delay events need: at a phone's start the look-ahead is enough; at its end the data
+    lags the clock by up to one event, so every frame is final only at the look-ahead plus the
+    longest event. Measured with the live animator's own is_final (frames whose data never
+    reaches the look-ahead past them, the last ones, left out)."""
+    from .._data import default_bank_dir
+    from ..bank import Bank
+    from ..live import LiveAnimator
+
+    bank = Bank.load(default_bank_dir())
+    root = default_bank_dir().parents[1]
+    for path in (root / "samples" / "hello.phn", root / "samples" / "balloons.phn", ctx.mfa / "acoustic_corpus.TextGrid"):
+        if not path.exists():
+            continue
+        live = LiveAnimator(bank, fps=25, prepare=False)
+        segs = live.resolve_timeline(_timeline(path))
+        end = segs[-1][1]
+        n = int((end - live.lookahead) * 25)
+        longest = max(e - s for s, e, _ in segs)
+        row = {"figure": "live_events_delay", "timeline": path.name, "frames": n, "look-ahead ms": round(1000 * live.lookahead),
+               "longest event ms": round(1000 * longest)}
+        for at in ("start", "end"):
+            need = needed_delays(segs, n, live.lookahead, at)
+            row[f"at {at}: needed max ms"] = round(1000 * float(need.max()))
+            row[f"at {at}: final at look-ahead"] = f"{int((need <= live.lookahead + 1e-9).sum())}/{n}"
+        row["look-ahead + longest ms"] = round(1000 * (live.lookahead + longest))
+        rows.append(row)

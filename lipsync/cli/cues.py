@@ -22,6 +22,7 @@ from typing import Dict
 from ..frames import DEFAULT_FPS as DEFAULT_RENDER_FPS
 from ..writers import DEFAULT_FPS, DEFAULT_TIER, WRITERS
 from ._common import add_bank_option, add_quiet_option, add_shapes_option, add_timeline_options, shaped_timeline
+from ._live import add_live_options, lookahead_seconds as _lookahead
 
 
 def add_parser(subparsers) -> argparse.ArgumentParser:
@@ -42,6 +43,7 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                              f"default) and of atlas frames (default: {DEFAULT_RENDER_FPS:g}, as lipsync render)")
     parser.add_argument("--atlas", default=None, metavar="ATLAS.json",
                         help="for --format atlas: the atlas (from `lipsync atlas`) whose cells the frames name")
+    add_live_options(parser)
     parser.add_argument("--tier-name", default=DEFAULT_TIER, metavar="NAME",
                         help=f"TextGrid tier name (default: {DEFAULT_TIER})")
     parser.add_argument("--audio", default=None, metavar="FILE",
@@ -70,6 +72,9 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(f"--fps {args.fps:g} is outside {FPS_RANGE[0]:g}..{FPS_RANGE[1]:g}")
     if os.path.isdir(args.output):
         raise InputError("is a folder; give a file name for the cues", path=args.output)
+    _lookahead(args)  # --lookahead without --live is refused before any work
+    if getattr(args, "live", False):
+        return _live_cues(args, name, float(DEFAULT_RENDER_FPS if args.fps is None else args.fps))
     if WRITERS.get(name).name == "atlas":
         return _atlas_frames(args, fps)
     if args.atlas is not None:
@@ -158,3 +163,33 @@ def _bank_track(args: argparse.Namespace, base):
     timeline, pmap = shaped_timeline(args, rest=bank.rest, viseme_names=bank.names)
     names, _ = resolve_visemes(base, bank.names)
     return timeline, pmap, {b: m for m, b in names.items()}, bank.rest
+
+
+def _live_cues(args: argparse.Namespace, name: str, fps: float) -> int:
+    """``--live``: the mouth shapes a live session fed the audio in real time shows, frame by frame."""
+    from .._data import default_bank_dir
+    from ..bank import Bank
+    from ..errors import InputError
+    from ..live.offline import live_cues, live_specs
+    from ..phonemes import DEFAULT_MAP, load_map, resolve_visemes
+
+    if WRITERS.get(name).name == "atlas" or args.atlas is not None:
+        raise InputError("--live writes mouth cues; --format atlas is for timelines")
+    bank = Bank.load(args.bank or default_bank_dir())
+    base = load_map(args.map or DEFAULT_MAP)
+    specs = live_specs(args.timeline, bank, fps=fps, lookahead=_lookahead(args), map=args.map,
+                       timing=args.timing, quiet=args.quiet)
+    names, _ = resolve_visemes(base, bank.names)
+    to_map = {b: m for m, b in names.items()}
+    cues = [(a, b, to_map.get(v, v)) for a, b, v in live_cues(specs, fps)]
+    write_names: Dict[str, str] = {}
+    if WRITERS.get(name).name == "moho":
+        write_names = {v: aliases[0] for v, aliases in base.aliases.items() if aliases}
+    from ..writers import write_cues
+
+    write_cues(cues, args.output, name, rest=to_map.get(bank.rest, bank.rest), fps=fps, tier=args.tier_name,
+               sound_file=os.path.abspath(args.timeline), names=write_names,
+               closures=[to_map.get(c, c) for c in base.closures], duration=len(specs) / fps)
+    if not args.quiet:
+        print(f"lipsync: wrote {len(cues)} live cues ({WRITERS.get(name).name}) to {args.output}", file=sys.stderr)
+    return 0

@@ -10,6 +10,7 @@ from ..encode import ENCODERS
 from ..render import METHODS
 from ._common import (add_bank_option, add_jobs_option, add_quiet_option, add_shapes_option, add_store_option,
                       add_timeline_options)
+from ._live import add_live_options, lookahead_seconds
 
 
 def add_parser(sub) -> None:
@@ -51,6 +52,7 @@ def add_parser(sub) -> None:
     add_jobs_option(p)
     add_quiet_option(p)
     add_timeline_options(p)
+    add_live_options(p)
     p.set_defaults(func=run)
 
 
@@ -69,6 +71,12 @@ def run(args: argparse.Namespace) -> int:
     bank = Bank.load(args.bank or default_bank_dir())
     composite = False if args.mouth_only else \
         composite_from_options(bank.composite, over=args.over, at=args.at, scale=args.scale)
+    lookahead = lookahead_seconds(args)      # --lookahead without --live is refused here
+    live = (True if lookahead is None else lookahead) if args.live else None
+    if args.live and args.text is not None:
+        raise InputError("--live hears the audio alone, as a live session does: leave out --text")
+    if args.live and args.shapes != "all":
+        raise InputError("--live shows what a live session shows: --shapes applies to timelines, not to --live")
     timeline, audio = args.timeline, args.audio
     if args.shapes != "all":  # the track read and mapped here, its G and H replaced
         from ..readers.audio import is_audio_input
@@ -77,7 +85,7 @@ def run(args: argparse.Namespace) -> int:
         if audio is None and is_audio_input(args.timeline, args.timeline_format):
             audio = args.timeline
         timeline, _ = shaped_timeline(args, rest=bank.rest, viseme_names=bank.names)
-    report = render_clip(timeline, args.output, bank=bank, audio=audio, fps=args.fps,
+    report = render_clip(timeline, args.output, bank=bank, audio=audio, fps=args.fps, live=live,
                          map=args.map, method=args.method, timing=args.timing, format=args.format,
                          crf=args.crf, preset=args.preset, store=args.store, jobs=args.jobs,
                          quiet=args.quiet, timeline_options=args, background=background, composite=composite)

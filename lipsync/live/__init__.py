@@ -3,13 +3,17 @@
 * :mod:`.causal` — :class:`CausalSequencer`: the sequencer's rules on a growing track,
   with the look-ahead they imply (:data:`LOOKAHEAD_S`, 380 ms);
 * :mod:`.animator` — :class:`LiveAnimator`: label mapping, thread safety, rendering;
-* :mod:`.pool` — :class:`RendererPool`: renderers shared by many animators.
+* :mod:`.pool` — :class:`RendererPool`: renderers shared by many animators;
+* :mod:`.audio` — the audio front-end of :meth:`LiveAnimator.feed_audio`: resampler, voice
+  gate, pocketsphinx's phone loop decoded in 20 ms blocks;
+* :mod:`.offline` — what a live session fed a recording shows (``render/cues --live``).
 
 ``lipsync serve`` (:mod:`lipsync.server`) streams these frames to browsers.
 """
 
-from .animator import LiveAnimator, replay_specs
+from .animator import AUDIO_LOOKAHEAD_S, LiveAnimator, replay_specs
 from .causal import LOOKAHEAD_S, RELAX_S, CausalSequencer
 from .pool import RendererPool
 
-__all__ = ["LiveAnimator", "replay_specs", "CausalSequencer", "RendererPool", "LOOKAHEAD_S", "RELAX_S"]
+__all__ = ["LiveAnimator", "replay_specs", "CausalSequencer", "RendererPool", "LOOKAHEAD_S", "RELAX_S",
+           "AUDIO_LOOKAHEAD_S"]

@@ -45,6 +45,26 @@ KINDS = ("viseme", "phoneme", "word")
 #: relaxation (RELAX_S) is well under it.
 _REST_AFTER_S = 60.0
 
+#: Where a live session's audio chooses the look-ahead by default: frame t is made when the
+#: audio reaches t + 200 ms. Measured (``python -m lipsync.bench --only live_audio``, the
+#: agreement of live mouth shapes with the offline phone loop's against the look-ahead, on
+#: the MFA recording and GRID sentences; docs/live.md has the table): agreement rises
+#: steeply to ~140 ms and by under 2 points from 200 to 400 ms, and 200 ms is a delay a
+#: call or a stream hides.
+AUDIO_LOOKAHEAD_S = 0.2
+#: Largest audio look-ahead: past it the frames equal the offline ones anyway.
+MAX_AUDIO_LOOKAHEAD_S = 1.0
+#: Audio phones are pushed (fixed for good) this long behind the frame being made: older
+#: than anything that frame's plan depends on (the sequencer reaches back less than 400 ms),
+#: so the recogniser's later revisions of them would change no frame still to be made.
+COMMIT_AFTER_S = 0.6
+#: How events may arrive, for :attr:`LiveAnimator.delay`: as each sound starts (its end
+#: known: TTS engines' events, timelines) or as it ends (a recogniser's output).
+EVENTS_AT = ("start", "end")
+#: The longest event assumed for ``events_at="end"``: long vowels and phrase-final sounds
+#: run to 300 ms (the MFA recording's longest phone, pauses aside, is 280 ms).
+LONGEST_EVENT_S = 0.3
+
 #: Longest single event accepted: a phone or word longer than a minute is a wrong time
 #: (milliseconds sent as seconds), not speech, and would plan thousands of frames at once.
 MAX_EVENT_S = 60.0
@@ -90,6 +110,14 @@ class LiveAnimator:
     prepare : bool
         Compute missing flows now (all pairs) so that no frame waits for one; default True
         for the ``flow`` and ``splat`` methods.
+    audio_lookahead : float, optional
+        For :meth:`feed_audio`: the frame of time ``t`` is fixed when the audio reaches
+        ``t + audio_lookahead`` (default :data:`AUDIO_LOOKAHEAD_S`, 0.2 s; 0 to 1 s).
+    events_at : {"start", "end"}
+        When pushed events arrive: as each sound starts (its end known: TTS events,
+        timelines) or as it ends (a recogniser's output). Only :attr:`delay` depends on it.
+    longest_event : float
+        With ``events_at="end"``: the longest event expected, seconds (default 0.3).
 
     Notes
     -----
@@ -98,12 +126,17 @@ class LiveAnimator:
     what has been pushed; when the clock passes the data the head holds the last shape up
     to the end of the data, then relaxes to rest as a timeline's end does. When everything
     is pushed before the first frame, every frame equals the offline Animator's.
+
+    Audio (:meth:`feed_audio`) may be fed instead of, or beside, events (events win where
+    both exist); docs/live.md has the delays each input needs.
     """
 
     def __init__(self, bank: Union[Bank, str, "os.PathLike[str]"], fps: float = DEFAULT_FPS, *,
                  map: Union[str, "os.PathLike[str]", PhonemeMap, None] = None, timing=None,
                  method: str = "flow", lookahead: Optional[float] = None, store: Optional[FlowStore] = None,
-                 renderer: Optional[RendererPool] = None, prepare: Optional[bool] = None):
+                 renderer: Optional[RendererPool] = None, prepare: Optional[bool] = None,
+                 audio_lookahead: Optional[float] = None, events_at: str = "start",
+                 longest_event: float = LONGEST_EVENT_S):
         self.bank = bank if isinstance(bank, Bank) else Bank.load(bank)
         self.pmap = map if isinstance(map, PhonemeMap) else load_map(map or DEFAULT_MAP)
         self._map_path = map if isinstance(map, (str, os.PathLike)) and os.path.isfile(map) else None
@@ -128,6 +161,22 @@ class LiveAnimator:
         self._words = _word_phones()
         # viseme names a map knows under other names (Preston Blair's MBP, etc, rest ...)
         self._viseme_aliases = {a.lower() for names in self.pmap.aliases.values() for a in names}
+        if events_at not in EVENTS_AT:
+            raise InputError(f"events_at must be one of {', '.join(EVENTS_AT)}, got {events_at!r}")
+        if not (isinstance(longest_event, (int, float)) and 0.0 <= longest_event <= MAX_EVENT_S):
+            raise InputError(f"longest_event must be 0..{MAX_EVENT_S:g} s, got {longest_event!r}")
+        self.events_at = events_at
+        self.longest_event = float(longest_event)
+        self.audio_lookahead = AUDIO_LOOKAHEAD_S if audio_lookahead is None else float(audio_lookahead)
+        if not (0.0 <= self.audio_lookahead <= MAX_AUDIO_LOOKAHEAD_S):
+            raise InputError(f"audio look-ahead must be 0..{MAX_AUDIO_LOOKAHEAD_S * 1000:g} ms, "
+                             f"got {audio_lookahead!r} s")
+        self._fe = None                 # the audio front-end, from the first feed_audio
+        self._shown: List[FrameSpec] = []   # audio: frames fixed when their audio came
+        self._committed_f = 0           # audio: 10 ms frames whose phones are pushed
+        self._events: List[Tuple[float, float, str]] = []   # mixed: events not yet pushed
+        self._tail: Optional[List[Tuple[float, float, str]]] = None   # provisional segments
+        self._finished = False          # audio: finish_audio was called
 
     # ------------------------------------------------------------------ input
     def push(self, start, end: Optional[float] = None, label: Optional[str] = None, *,
@@ -162,6 +211,9 @@ class LiveAnimator:
                 raise InputError("push(start, end, label) needs all three (or a Timeline)")
             segs = self.resolve(start, end, label, kind=kind, offset=offset)
         with self._state:
+            if self._fe is not None:
+                self._hold_events(segs)
+                return
             try:
                 self._seq.extend(segs)
             except ValueError as exc:
@@ -259,8 +311,39 @@ class LiveAnimator:
             return self._seq.horizon - self.lookahead
 
     def is_final(self, t: float) -> bool:
-        """True when the frame at ``t`` cannot change with later pushes."""
+        """True when the frame at ``t`` cannot change with later pushes (or audio: a frame
+        is fixed once the audio has reached ``audio_lookahead`` past it)."""
+        if self._fe is not None:
+            with self._state:
+                if self._finished or self.index(t) < len(self._shown):
+                    return True
         return t <= self.final_until
+
+    @property
+    def delay(self) -> float:
+        """Seconds a player must run behind the newest data for every frame to be final when due.
+
+        * audio (:meth:`feed_audio`): ``audio_lookahead`` (the frame of time ``t`` is made
+          when the audio reaches ``t + audio_lookahead``);
+        * events pushed as each sound *starts* (with its end: TTS engines' phoneme or viseme
+          events, a timeline): ``lookahead``;
+        * events pushed as each sound *ends* (a recogniser's output, ``events_at="end"``):
+          the data then reaches only the end of the last finished sound, up to one sound
+          behind the clock, so ``lookahead + longest_event`` (measured in
+          ``python -m lipsync.bench --only live``: 380 ms is never enough there; with the
+          MFA recording's phones pushed at their ends every frame was final at
+          380 + its longest event).
+
+        Examples
+        --------
+        >>> from lipsync._data import default_bank_dir
+        >>> LiveAnimator(default_bank_dir(), prepare=False, events_at="end").delay
+        0.68
+        """
+        if self._fe is not None:
+            return self.audio_lookahead
+        extra = self.longest_event if self.events_at == "end" else 0.0
+        return round(self.lookahead + extra, 6)
 
     def index(self, t: float) -> int:
         """The frame number shown at time ``t`` (the frame whose interval holds ``t``; >= 0).
@@ -278,9 +361,169 @@ class LiveAnimator:
         return max(int(math.floor(t * self.fps + 1e-9)), 0)
 
     def spec(self, n: int) -> FrameSpec:
-        """The FrameSpec of frame ``n`` from what has been pushed."""
+        """The FrameSpec of frame ``n`` from what has been pushed (and the audio fed: a frame
+        is fixed once the audio reaches ``audio_lookahead`` past it, later ones show the
+        best guess so far)."""
+        n = max(int(n), 0)
         with self._state:
-            return self._seq.spec(int(n))
+            if self._fe is None:
+                return self._seq.spec(n)
+            if n < len(self._shown):
+                return self._shown[n]
+            return self._provisional(n)
+
+    # ------------------------------------------------------------------ audio
+    def feed_audio(self, samples, sample_rate: int = 16000) -> List[int]:
+        """Add audio (mono; any chunk size; ``int16``, or float in [-1, 1]); returns the frame
+        numbers it made due.
+
+        The audio is the playback clock: its first sample is time 0. A voice gate and
+        pocketsphinx's phone loop (:mod:`lipsync.live.audio`) turn it into phones, the map
+        into visemes, the sequencer (the animator's timing) into frames. The frame of time
+        ``t`` is fixed as soon as the audio reaches ``t + audio_lookahead`` (a player shows
+        it with the sound delayed by that much: :attr:`delay`), from everything heard by
+        then. Events pushed in the same session win over the audio where both exist.
+
+        Invariance: the audio is processed in 20 ms blocks of 16 kHz samples whatever the
+        chunks, so the frames depend only on the samples fed, never on how they were cut
+        (any chunk sizes, int16 or the same values as float); a stream keeps one rate.
+
+        Parameters
+        ----------
+        samples : array-like
+            Mono samples, ``int16`` or float in [-1, 1] (``int16 / 32768`` gives exactly the
+            same frames as the integers).
+        sample_rate : int
+            8000 to 192000 Hz; resampled to 16 kHz inside.
+
+        Returns
+        -------
+        list of int
+            Frames fixed by this chunk (each ``spec(n)`` is then final).
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from lipsync._data import default_bank_dir
+        >>> live = LiveAnimator(default_bank_dir(), prepare=False)
+        >>> due = live.feed_audio(np.zeros(16000, np.int16), 16000)   # one second of silence
+        >>> len(due), live.spec(due[-1]).shown
+        (21, 'X')
+        """
+        from .audio import AudioFrontEnd
+
+        with self._state:
+            if self._finished:
+                raise InputError("the audio has ended (finish_audio was called); start a new animator")
+            if self._fe is None:
+                self._fe = AudioFrontEnd()
+            self._fe.add(samples, sample_rate)
+            due: List[int] = []
+            while self._fe.step():   # one block at a time: the state after each is the same for any chunking
+                self._tail = None
+                self._commit(self._fe.frames - self._commit_frames())
+                now = self._fe.time
+                while True:
+                    n = len(self._shown)
+                    if n / self.fps + self.audio_lookahead > now + 1e-9:
+                        break
+                    self._shown.append(self._provisional(n))
+                    due.append(n)
+            return due
+
+    def finish_audio(self) -> None:
+        """The audio has ended: its last phones are decided and every later frame follows
+        from all of it (``lipsync render --live`` calls this after the file's last chunk).
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from lipsync._data import default_bank_dir
+        >>> live = LiveAnimator(default_bank_dir(), prepare=False)
+        >>> _ = live.feed_audio(np.zeros(3200, np.int16)); live.finish_audio()
+        >>> live.spec(4).shown, live.is_final(0.16)
+        ('X', True)
+        """
+        with self._state:
+            if self._fe is None:
+                return
+            self._fe.rec.restart()
+            self._tail = None
+            self._commit(self._fe.frames, flush=True)
+            self._finished = True
+
+    @property
+    def audio_time(self) -> float:
+        """Seconds of audio fed and processed so far (whole 20 ms blocks)."""
+        return 0.0 if self._fe is None else self._fe.time
+
+    def _commit_frames(self) -> int:
+        from .audio import FRAME_S
+
+        return int(round((self.audio_lookahead + COMMIT_AFTER_S) / FRAME_S))
+
+    def _phone_segments(self, runs, start_f: int) -> List[Tuple[float, float, str]]:
+        """Gated phone runs (10 ms frames) -> the bank's viseme segments (one call to the map)."""
+        from .audio import FRAME_S
+
+        if not runs:
+            return []
+        tl = Timeline(tuple(Segment(a * FRAME_S, b * FRAME_S, p) for a, b, p in runs), kind=PHONEME)
+        first = runs[0][0] * FRAME_S
+        # the map fills the time before the first sound with rest: gaps are rest anyway
+        return [(max(a, first), b, v) for a, b, v in self._map_timeline(tl, 0.0, first=first) if b > first]
+
+    def _commit(self, upto_f: int, *, flush: bool = False) -> None:
+        """Push the audio's phones before frame ``upto_f`` (and the held events before them)."""
+        from .audio import FRAME_S
+
+        fe = self._fe
+        if upto_f <= self._committed_f and not flush:
+            return
+        runs = fe.phones(self._committed_f)
+        keep = [r for r in runs if r[1] <= upto_f]
+        straddle = [r for r in runs if r[0] < upto_f < r[1]]
+        new_f = straddle[0][0] if straddle else max(upto_f, self._committed_f)
+        if flush:
+            keep, new_f = runs, max(fe.frames, self._committed_f)
+        segs = self._phone_segments(keep, self._committed_f)
+        cut = new_f * FRAME_S
+        if flush and self._events:
+            cut = max(cut, self._events[-1][1])
+        mixed = _overlay(segs, self._events)
+        push = [s for s in mixed if s[1] <= cut + 1e-9]
+        self._events = [e for e in self._events if e[1] > cut + 1e-9]
+        try:
+            self._seq.extend(push)
+        except ValueError as exc:  # pragma: no cover - segments are in order by construction
+            raise TimelineError(str(exc)) from None
+        self._committed_f = new_f
+        fe.forget(new_f)
+
+    def _provisional(self, n: int) -> FrameSpec:
+        if self._tail is None:
+            runs = self._fe.phones(self._committed_f) if self._fe is not None else []
+            self._tail = _overlay(self._phone_segments(runs, self._committed_f), self._events)
+            if self._fe is not None and self._fe.time > (self._tail[-1][1] if self._tail else 0.0):
+                # the audio heard so far is the track's end: silence after the last sound
+                end = self._fe.time
+                start = max(self._tail[-1][1] if self._tail else 0.0, self._seq.horizon)
+                if end > start:
+                    self._tail.append((start, end, self.bank.rest))
+        return self._seq.spec_with(n, self._tail)
+
+    def _hold_events(self, segs) -> None:
+        """Mixed session: keep events until the audio's phones around them are pushed."""
+        if not segs:
+            return
+        last = self._events[-1][1] if self._events else self._seq.horizon
+        if segs[0][0] < last - 1e-4 and self._events:
+            raise TimelineError(f"event at {segs[0][0]:g} s starts before the end of the events so far "
+                                f"({last:g} s): push in time order")
+        # events for time already pushed from the audio are too late for it: their rest counts
+        h = self._seq.horizon
+        self._events.extend((max(a, h), b, v) for a, b, v in segs if b > h)
+        self._tail = None
 
     def spec_at(self, t: float) -> FrameSpec:
         """The FrameSpec shown at time ``t``."""
@@ -334,3 +577,27 @@ def replay_specs(live: LiveAnimator, segments, n_frames: int, lag: float) -> Lis
             n += 1
     got.extend(live.spec(k) for k in range(n, n_frames))
     return got
+
+
+def _overlay(base: List[Tuple[float, float, str]], top: List[Tuple[float, float, str]]
+             ) -> List[Tuple[float, float, str]]:
+    """``base`` segments where no ``top`` segment lies, ``top`` ones where they do (time order).
+
+    Examples
+    --------
+    >>> _overlay([(0.0, 1.0, "A"), (1.0, 2.0, "B")], [(0.5, 1.2, "C")])
+    [(0.0, 0.5, 'A'), (0.5, 1.2, 'C'), (1.2, 2.0, 'B')]
+    """
+    if not top:
+        return list(base)
+    out: List[Tuple[float, float, str]] = []
+    for a, b, v in base:
+        pieces = [(a, b)]
+        for s, e, _ in top:
+            if e <= a or s >= b:
+                continue
+            pieces = [p for x, y in pieces for p in ((x, min(y, s)), (max(x, e), y)) if p[1] > p[0]]
+        out.extend((x, y, v) for x, y in pieces)
+    out.extend(top)
+    out.sort(key=lambda seg: (seg[0], seg[1]))
+    return out

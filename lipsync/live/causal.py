@@ -211,6 +211,29 @@ class CausalSequencer:
             return self._relax[n - stop]
         return self._rest_spec
 
+    def spec_with(self, n: int, tail: Track) -> FrameSpec:
+        """Frame ``n`` as it would be if ``tail`` (segments from the end of the track on) were
+        pushed, without pushing them: the live audio's provisional phones
+        (:meth:`lipsync.LiveAnimator.feed_audio`), replanned with each block."""
+        tail = [(max(float(s), self._horizon), float(e), v) for s, e, v in tail if e > self._horizon]
+        if not tail:
+            return self.spec(n)
+        if self._window is None:
+            self.spec(self._first)       # moves the cut with what is pushed
+        n = max(n, 0)
+        if n < self._first:
+            return self._frozen[n]
+        raw, horizon = self._raw, self._horizon
+        try:
+            self._raw, self._horizon = raw + tail, tail[-1][1]
+            total = self._horizon if n < frame_count(self._horizon, self.fps) else self._horizon + self._relax_s
+            end = frame_count(total, self.fps)
+            if n >= end:
+                return self._rest_spec
+            return self._plan(total, n, n + 1, end)[0]
+        finally:
+            self._raw, self._horizon = raw, horizon
+
     def is_final(self, n: int) -> bool:
         """True when frame ``n`` cannot change with later pushes (by the look-ahead rule)."""
         return n < self._first or n / self.fps <= self.final_until
@@ -220,7 +243,7 @@ class CausalSequencer:
     def _first(self) -> int:
         return len(self._frozen)
 
-    def _plan(self, total: float, first: int, stop: int) -> List[FrameSpec]:
+    def _plan(self, total: float, first: int, stop: int, end: Optional[int] = None) -> List[FrameSpec]:
         # Frames first .. stop - 1 of the window's track ending at ``total`` (stop is its end).
         if stop <= first:
             return []
@@ -233,11 +256,11 @@ class CausalSequencer:
             if classes is None:
                 classes = co.default_classes({v for _, _, v in segs}, rest=self.rest, closures=self.closures)
             return co.dominance_frames(segs, fps=self.fps, classes=classes, params=self.params,
-                                       closures=self.closures, first=first, stop=stop)
+                                       closures=self.closures, first=first, stop=stop, end=end)
         segs = plan_segments(track, rest=self.rest, closures=self.closures, duration=total, start=self._cut)
         windows = plan_transitions(segs)
         return frame_specs(segs, windows, fps=self.fps, curve=self.curve, closures=self.closures,
-                           first=first, stop=stop)
+                           first=first, stop=stop, end=end)
 
     def _anchor(self) -> Optional[int]:
         """The first frame of the latest valid cut in the window (module docstring), if any."""

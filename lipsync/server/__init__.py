@@ -5,6 +5,8 @@ Routes (all but the page and its static files need the session token, see
 headers and bounds request bodies):
 
 * ``GET /`` -- the demo page: plays ``samples/hello.wav`` and draws the live head on a canvas;
+* ``GET /mic`` -- the microphone page: streams the microphone (AudioWorklet, 16-bit PCM) and
+  shows the frames in step with the audio delayed by the look-ahead;
 * ``POST /api/render?name=FILE[&text=...][&format=NAME][&fps=N][&lang=CODE]`` -- the body is a timeline
   or audio file; answers ``202 {"job": ID, ...}``; ``GET /api/jobs/ID`` reports state and
   progress, ``GET /api/jobs/ID/video`` gives the mp4;
@@ -133,7 +135,8 @@ class LiveServer:
                          timing=config.timing, method=config.method)
         self.sessions: set = set()
         self.stats = {"frames": 0, "errors": 0, "sessions_total": 0, "refused_sessions": 0}
-        self.app = Guard(self._routes(), session=session, max_body=config.max_upload)
+        self.app = Guard(self._routes(), session=session, max_body=config.max_upload,
+                         public=("/", "/index.html", "/mic", "/favicon.ico", "/static/"))
         self._closed = False
 
     # ------------------------------------------------------------------ app
@@ -148,6 +151,9 @@ class LiveServer:
 
         async def page(request):
             return FileResponse(STATIC / "index.html", media_type="text/html")
+
+        async def mic(request):
+            return FileResponse(STATIC / "mic.html", media_type="text/html")
 
         async def status(request):
             return JSONResponse({"sessions": len(self.sessions), "max_sessions": self.config.max_sessions,
@@ -196,7 +202,7 @@ class LiveServer:
             return Response(status_code=204)
 
         return Starlette(routes=[
-            Route("/", page), Route("/index.html", page), Route("/favicon.ico", favicon),
+            Route("/", page), Route("/index.html", page), Route("/mic", mic), Route("/favicon.ico", favicon),
             Mount("/static", app=StaticFiles(directory=STATIC), name="static"),
             Route("/api/status", status), Route("/api/demo", demo), Route("/demo/hello.wav", demo_audio),
             Route("/api/render", render, methods=["POST"]),

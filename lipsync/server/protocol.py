@@ -3,7 +3,16 @@
 Client -> server, text frames holding one JSON object each:
 
 * ``{"type": "config", "fps": 25, "format": "jpeg"|"webp", "quality": 80}`` (optional,
-  before anything else is pushed);
+  before anything else is pushed); for audio also ``"audio_rate": 48000`` (Hz, before the
+  first audio), ``"lookahead": 200`` (ms, the audio look-ahead, before the first audio) and
+  ``"specs": true`` (a ``{"type": "spec", "n", "from", "to", "alpha"}`` text message before
+  each frame: what it shows, for checking);
+* binary frames: audio, 16-bit little-endian PCM mono at ``audio_rate`` (at most
+  :data:`MAX_AUDIO_MESSAGE_S` per message, in real time: at most
+  :data:`MAX_AUDIO_AHEAD_S` ahead of the wall clock since the first). Audio is the session's
+  clock: each frame is sent as soon as the audio reaches its time plus the look-ahead, so a
+  client shows it with its sound delayed by the look-ahead (``ready`` and ``config`` say how
+  much: ``audio_lookahead``). Events pushed in an audio session win where both exist;
 * ``{"type": "push", "start": 0.1, "end": 0.25, "label": "AA", "kind": "phoneme"}``
   (``kind`` optional: ``viseme``, ``phoneme`` or ``word``), or
   ``{"type": "push", "events": [{"start": .., "end": .., "label": ..}, ...]}``;
@@ -47,6 +56,18 @@ FLAG_FINAL = 1
 MAX_EVENTS_PER_MESSAGE = 2000
 #: Longest label: words and phone names are short; this bounds what is kept and echoed.
 MAX_LABEL_CHARS = 64
+#: Audio sample rates a session may stream (telephone to studio rates).
+AUDIO_RATES = (8000, 11025, 12000, 16000, 22050, 24000, 32000, 44100, 48000, 88200, 96000)
+#: Longest audio in one binary message: browsers send 3-20 ms, a file streamer maybe 100 ms;
+#: a second (192 kB at 96 kHz, under the WebSocket's message limit) bounds what one message
+#: makes the server decode at once.
+MAX_AUDIO_MESSAGE_S = 1.0
+#: Audio may run ahead of the wall clock (since the session's first audio) by this much:
+#: network jitter and a client's buffering, not a file pushed at full speed (that is
+#: ``lipsync render --live``'s job), so one session costs at most its real-time share of CPU.
+MAX_AUDIO_AHEAD_S = 2.0
+#: The audio look-ahead a session may ask for, ms.
+LOOKAHEAD_MS_RANGE = (0, 1000)
 #: The frame rates and image formats a session may ask for.
 FPS_CHOICES = (10, 12, 15, 20, 24, 25, 30, 50, 60)
 FORMATS = ("jpeg", "webp")
@@ -61,6 +82,9 @@ class Config:
     fps: Optional[float] = None
     format: Optional[str] = None
     quality: Optional[int] = None
+    audio_rate: Optional[int] = None
+    lookahead: Optional[float] = None     # seconds
+    specs: Optional[bool] = None
 
 
 @dataclass(frozen=True)
@@ -135,12 +159,47 @@ def parse(text: str) -> Message:
         if quality is not None and (isinstance(quality, bool) or not isinstance(quality, int)
                                     or not 10 <= quality <= 100):
             raise ProtocolError("config: quality must be an integer 10..100")
-        return Config(None if fps is None else float(fps), fmt, quality)
+        rate = obj.get("audio_rate")
+        if rate is not None and (isinstance(rate, bool) or rate not in AUDIO_RATES):
+            raise ProtocolError(f"config: audio_rate must be one of {', '.join(map(str, AUDIO_RATES))}")
+        look = obj.get("lookahead")
+        if look is not None and (isinstance(look, bool) or not isinstance(look, (int, float))
+                                 or not LOOKAHEAD_MS_RANGE[0] <= look <= LOOKAHEAD_MS_RANGE[1]):
+            raise ProtocolError(f"config: lookahead must be {LOOKAHEAD_MS_RANGE[0]}..{LOOKAHEAD_MS_RANGE[1]} ms")
+        specs = obj.get("specs")
+        if specs is not None and not isinstance(specs, bool):
+            raise ProtocolError("config: specs must be true or false")
+        return Config(None if fps is None else float(fps), fmt, quality, None if rate is None else int(rate),
+                      None if look is None else float(look) / 1000.0, specs)
     if kind == "stop":
         return Stop()
     if kind == "ping":
         return Ping()
     raise ProtocolError(f"unknown message type {str(kind)[:20]!r}; valid: config, push, clock, stop, ping")
+
+
+def audio_samples(data: bytes, rate: Optional[int]):
+    """A binary audio message as ``int16`` samples, or :class:`ProtocolError` saying what is wrong.
+
+    Examples
+    --------
+    >>> audio_samples(b"\\x01\\x00\\xff\\xff", 16000).tolist()
+    [1, -1]
+    >>> audio_samples(b"\\x01", 16000)
+    Traceback (most recent call last):
+    ...
+    lipsync.server.protocol.ProtocolError: audio: 1 bytes is not whole 16-bit samples
+    """
+    import numpy as np
+
+    if rate is None:
+        raise ProtocolError('audio: send {"type": "config", "audio_rate": HZ} before the first audio')
+    if len(data) % 2:
+        raise ProtocolError(f"audio: {len(data)} bytes is not whole 16-bit samples")
+    if len(data) > 2 * rate * MAX_AUDIO_MESSAGE_S:
+        raise ProtocolError(f"audio: {len(data) // 2} samples in one message, over {MAX_AUDIO_MESSAGE_S:g} s "
+                            f"at {rate} Hz")
+    return np.frombuffer(data, "<i2").astype(np.int16)
 
 
 def pack_frame(n: int, t: float, final: bool, image: bytes) -> bytes:

@@ -1,4 +1,5 @@
-"""One live WebSocket session: events in, frames out as they fall due on the client's clock.
+"""One live WebSocket session: events or audio in, frames out as they fall due on the client's
+clock (events) or as the audio reaches them (audio: binary messages, :mod:`.protocol`).
 
 Two tasks per session: the reader parses client messages (:mod:`.protocol`) and feeds the
 session's :class:`lipsync.LiveAnimator`; the sender waits for the next frame to fall due on
@@ -24,6 +25,10 @@ from . import protocol
 #: Longest playback time a session may reach: an hour of speech, far beyond any utterance,
 #: bounds the frame schedule the session keeps (25 fps x 3600 s FrameSpecs, ~10 MB).
 MAX_SESSION_TIME_S = 3600.0
+#: An audio session's sender sends every frame the audio made due, in order, unless it is more
+#: than this many behind (a loaded server): then it skips to the newest, as the clock-driven
+#: sender does, rather than show the head late.
+AUDIO_SKIP_FRAMES = 5
 
 
 class LiveSession:
@@ -46,13 +51,20 @@ class LiveSession:
         self.closed = False
         self._frame: Optional[np.ndarray] = None
         self._bgr: Optional[np.ndarray] = None
+        # audio (binary messages): the stream's rate, look-ahead, and the frames it made due
+        self.audio_rate: Optional[int] = None
+        self.audio_lookahead: Optional[float] = None
+        self.audio_started: Optional[float] = None   # monotonic time of the first audio
+        self.audio_s = 0.0                           # seconds of audio received
+        self.due = -1                                # newest frame the audio made due
+        self.specs = False
 
     # ------------------------------------------------------------------ lifecycle
     def _animator(self) -> LiveAnimator:
         if self.live is None:
             s = self.server
             self.live = LiveAnimator(s.bank, fps=self.fps, map=s.pmap, timing=s.config.timing,
-                                     renderer=s.pool, prepare=False)
+                                     renderer=s.pool, prepare=False, audio_lookahead=self.audio_lookahead)
             h, w = self.live.shape
             c = self.live.renderer.channels  # 4 for a bank with transparency
             self._frame = np.empty((h, w, c), np.uint8)
@@ -63,7 +75,8 @@ class LiveSession:
         live = self._animator()
         h, w = live.shape
         await self.ws.send_json({"type": "ready", "fps": self.fps, "width": w, "height": h,
-                                 "lookahead": live.lookahead, "formats": list(protocol.FORMATS)})
+                                 "lookahead": live.lookahead, "audio_lookahead": live.audio_lookahead,
+                                 "audio_rates": list(protocol.AUDIO_RATES), "formats": list(protocol.FORMATS)})
         sender = asyncio.create_task(self._send_frames())
         try:
             await self._read()
@@ -91,15 +104,37 @@ class LiveSession:
             if message["type"] == "websocket.disconnect":
                 return
             text = message.get("text")
-            if text is None:
-                await self._error("binary messages are not accepted; send JSON text")
-                continue
             try:
+                if text is None:
+                    await self._audio(message.get("bytes") or b"")
+                    continue
                 await self._handle(protocol.parse(text))
             except InputError as exc:
                 await self._error(str(exc))
             except WebSocketDisconnect:
                 return
+
+    async def _audio(self, data: bytes) -> None:
+        """A binary message: audio samples, checked (:func:`protocol.audio_samples`), fed on
+        the server's pool (the recogniser's CPU work stays off the event loop)."""
+        pcm = protocol.audio_samples(data, self.audio_rate)
+        now = time.monotonic()
+        if self.audio_started is None:
+            self.audio_started = now
+        seconds = len(pcm) / self.audio_rate
+        if self.audio_s + seconds > MAX_SESSION_TIME_S:
+            raise protocol.ProtocolError(f"audio: a session streams at most {MAX_SESSION_TIME_S:g} s")
+        ahead = self.audio_s + seconds - (now - self.audio_started)
+        if ahead > protocol.MAX_AUDIO_AHEAD_S:
+            raise protocol.ProtocolError(f"audio: {ahead:.1f} s ahead of real time (at most "
+                                         f"{protocol.MAX_AUDIO_AHEAD_S:g} s); the chunk was dropped")
+        live = self._animator()
+        self.audio_s += seconds
+        due = await asyncio.get_running_loop().run_in_executor(self.server.executor, live.feed_audio,
+                                                                pcm, self.audio_rate)
+        if due:
+            self.due = max(self.due, due[-1])
+            self.wake.set()
 
     async def _handle(self, msg) -> None:
         if isinstance(msg, protocol.Clock):
@@ -119,15 +154,36 @@ class LiveSession:
                     raise protocol.ProtocolError(f"push: {where}{exc}") from None
             self.wake.set()
         elif isinstance(msg, protocol.Config):
+            started = self.live is not None and (self.live.horizon > 0 or self.audio_started is not None)
+            prepare = renew = False
+            if msg.audio_rate is not None and msg.audio_rate != self.audio_rate:
+                if self.audio_started is not None:
+                    raise protocol.ProtocolError("config: audio_rate can only be set before the first audio")
+                self.audio_rate = msg.audio_rate
+                prepare = renew = True     # a recogniser made for another rate is replaced
+            if msg.lookahead is not None and msg.lookahead != self._animator().audio_lookahead:
+                if started:
+                    raise protocol.ProtocolError("config: lookahead can only change before the first push or audio")
+                self.audio_lookahead, renew = msg.lookahead, True
             if msg.fps is not None and msg.fps != self.fps:
-                if self.live is not None and self.live.horizon > 0:
+                if started:
                     raise protocol.ProtocolError("config: fps can only change before the first push")
-                self.fps, self.live = msg.fps, None
+                self.fps, renew = msg.fps, True
+            if renew:
+                self.live = None
                 self._animator()
+            if prepare or (renew and self.audio_rate is not None):
+                # load the recogniser now (~0.5 s), not when the first audio is due
+                await asyncio.get_running_loop().run_in_executor(
+                    self.server.executor, self.live.feed_audio, np.zeros(0, np.int16), self.audio_rate)
             self.format = msg.format or self.format
             self.quality = msg.quality or self.quality
-            await self.ws.send_json({"type": "config", "fps": self.fps, "format": self.format,
-                                     "quality": self.quality})
+            if msg.specs is not None:
+                self.specs = msg.specs
+            reply = {"type": "config", "fps": self.fps, "format": self.format, "quality": self.quality}
+            if self.audio_rate is not None or msg.lookahead is not None or msg.specs is not None:
+                reply.update(audio_rate=self.audio_rate, audio_lookahead=self.live.audio_lookahead, specs=self.specs)
+            await self.ws.send_json(reply)
         elif isinstance(msg, protocol.Stop):
             self.clock_t = None
         elif isinstance(msg, protocol.Ping):
@@ -160,9 +216,34 @@ class LiveSession:
             raise RuntimeError(f"could not encode frame {n} as {fmt}")
         return protocol.pack_frame(n, n / live.fps, final, buf.tobytes())
 
+    async def _send_frame(self, live: LiveAnimator, n: int) -> bool:
+        data = await asyncio.get_running_loop().run_in_executor(self.server.executor, self._encode, live, n,
+                                                                self.format, self.quality)
+        if self.closed or live is not self.live:
+            return False
+        if self.specs:
+            spec = live.spec(n)
+            await self.ws.send_json({"type": "spec", "n": n, "from": spec.from_viseme, "to": spec.to_viseme,
+                                     "alpha": round(float(spec.alpha), 6)})
+        await self.ws.send_bytes(data)
+        self.last_sent = n
+        self.frames_sent += 1
+        self.server.stats["frames"] += 1
+        return True
+
     async def _send_frames(self) -> None:
-        loop = asyncio.get_running_loop()
         while not self.closed:
+            if self.audio_started is not None and self.live is not None:
+                # audio is the clock: every frame it made due, in order; one that fell more
+                # than AUDIO_SKIP_FRAMES behind skips to the newest (the head stays in sync)
+                live = self.live
+                if self.last_sent < self.due:
+                    n = self.last_sent + 1 if self.due - self.last_sent <= AUDIO_SKIP_FRAMES else self.due
+                    await self._send_frame(live, n)
+                    continue
+                self.wake.clear()
+                await self.wake.wait()
+                continue
             t = self._now()
             live = self.live
             if t is None or live is None or t > MAX_SESSION_TIME_S:
@@ -171,14 +252,7 @@ class LiveSession:
                 continue
             n = live.index(t)
             if n != self.last_sent:
-                data = await loop.run_in_executor(self.server.executor, self._encode, live, n,
-                                                  self.format, self.quality)
-                if self.closed or live is not self.live:
-                    continue
-                await self.ws.send_bytes(data)
-                self.last_sent = n
-                self.frames_sent += 1
-                self.server.stats["frames"] += 1
+                await self._send_frame(live, n)
                 continue
             # sleep until the next frame falls due, or a new clock / push arrives
             t = self._now()
