@@ -96,6 +96,27 @@ class _CompositeSpec(BaseModel):
     scale: float = 1.0
 
 
+class _PlateSpec(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    video: str
+    poses: str
+    mask: str
+    # bank.yaml's switch: false keeps the files but renders the still pictures
+    enabled: bool = True
+
+
+@dataclass(frozen=True)
+class PlateFiles:
+    """bank.yaml ``plate:`` (a bank made from video): the speaker's idle stretch of video,
+    each frame's pose, and the lower-face mask (:mod:`lipsync.videobank.plate`); loaded by
+    :func:`lipsync.composite.plate.load_plate` when a render needs it."""
+
+    video: Path
+    poses: Path
+    mask: Path
+    enabled: bool = True
+
+
 class _BankSpec(BaseModel):
     model_config = ConfigDict(extra="forbid")
     name: str
@@ -111,6 +132,7 @@ class _BankSpec(BaseModel):
     coarticulation: Optional[DominanceOverrides] = None
     visemes: Dict[str, _VisemeSpec]
     composite: Optional[_CompositeSpec] = None
+    plate: Optional[_PlateSpec] = None
 
     @field_validator("timing")
     @classmethod
@@ -304,6 +326,9 @@ class Bank:
     coarticulation : DominanceParams or None
         bank.yaml's ``coarticulation``: the dominance model's constants fitted to this
         speaker (keys it leaves out keep :data:`lipsync.coarticulation.DEFAULT_PARAMS`).
+    plate : PlateFiles or None
+        bank.yaml's ``plate``: the idle stretch of the speaker's video a render composites
+        the morphed lower face onto (banks made from video; ``enabled: false`` turns it off).
 
     Examples
     --------
@@ -327,6 +352,7 @@ class Bank:
     timing: Optional[str] = None
     coarticulation: Optional[DominanceParams] = field(default=None, repr=False)
     refine: bool = True
+    plate: Optional[PlateFiles] = field(default=None, repr=False)
 
     @property
     def feature_names(self) -> Tuple[str, ...]:
@@ -851,7 +877,18 @@ def _build(root, data, folder: Path, yaml_path: Path, image_cache) -> Bank:
             fail(f"composite ({c.image!r}): {problem}", ["composite", "scale" if "scale" in problem else "at"])
         composite = Composite(image=body, at=(float(c.at[0]), float(c.at[1])), scale=float(c.scale), path=real)
 
+    plate = None
+    if spec.plate is not None:
+        files = {}
+        for key in ("video", "poses", "mask"):
+            rel = getattr(spec.plate, key)
+            real = inside(rel, f"plate {key}", ["plate", key])
+            if not real.is_file():
+                fail(f"plate {key}: file {rel!r} not found", ["plate", key])
+            files[key] = real
+        plate = PlateFiles(enabled=spec.plate.enabled, **files)
+
     return Bank(path=folder, name=spec.name, rest=spec.rest, warp=spec.warp, symmetry=spec.symmetry,
                 names=names, line_names=tuple(line_names), images=images, lines=lines, features=features,
-                composite=composite, timing=spec.timing, refine=spec.refine,
+                composite=composite, timing=spec.timing, refine=spec.refine, plate=plate,
                 coarticulation=spec.coarticulation.apply() if spec.coarticulation is not None else None)

@@ -1,0 +1,182 @@
+"""The idle plate: a stretch of the speaker's own video kept in the bank, so renders live.
+
+A bank's pictures are stills; a person is not. ``lipsync render`` of a bank with a plate
+shows, at every frame, one frame of this stretch (played forwards, then backwards:
+:func:`lipsync.composite.plate.pingpong`, so the loop has no seam) with the morphed lower
+face moved onto it (:class:`lipsync.composite.plate.PlateCompositor`): the blinks, the
+glances and the small head motion are the speaker's own.
+
+Chosen here (:func:`choose_stretch`), from the frames :func:`lipsync.videobank.make_bank`
+has already tracked and registered: the window of :data:`PLATE_SECONDS` (or the whole
+video, if shorter) in which the **lower face moves least** (the jaw's drop and the lips'
+opening, frame to frame, in eye distances: speech there would show around the mask's
+edge) and the **head stays near one pose** (the stabilisation residual), with the face
+found in every frame. The frames are cut at the bank's framing by **one** transform, the
+stretch's mean pose (stabilised: the crop does not jitter with the tracker, while the head
+keeps its own motion inside it), and each frame's own pose is stored as the 2x3 matrix
+taking bank pixels to that plate frame's pixels.
+
+Written into the bank (bank.yaml ``plate: {video: plate.mp4, poses: plate.json, mask:
+plate-mask.png}``):
+
+* ``plate.mp4`` — the frames at the bank's size (H.264, crf :data:`PLATE_CRF`);
+* ``plate.json`` — ``fps``, per-frame ``poses``, where the stretch came from;
+* ``plate-mask.png`` — the lower-face mask in bank pixels (the union over the visemes'
+  pictures: the widest jaw stays inside it), grey 0-255.
+
+Examples
+--------
+>>> import numpy as np
+>>> motion = np.array([5, 5, 0, 0, 0, 0, 5, 5], float)
+>>> best_window(motion, 3)
+(2, 5)
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Tuple
+
+import numpy as np
+
+#: bank.yaml's file names.
+VIDEO_NAME, POSES_NAME, MASK_NAME = "plate.mp4", "plate.json", "plate-mask.png"
+#: Length of the idle stretch: long enough to hold a blink or two (people blink every
+#: 2-10 s) and a few glances; played back and forth, it never repeats within 2x this.
+PLATE_SECONDS = 4.0
+#: x264 quality of plate.mp4: near-transparent (the plate is shown as it is in every frame,
+#: so its own compression would add to the render's).
+PLATE_CRF = 12
+#: A head pose residual (eye distances, lipsync.videobank.stabilise) counts this much
+#: against a window per unit of lower-face motion: 0.01 eye distances of head turn weigh as
+#: much as the jaw moving 0.01 eye distances a frame.
+RESIDUAL_WEIGHT = 1.0
+
+
+@dataclass(frozen=True)
+class Stretch:
+    """The chosen frames: ``video`` (index), ``[start, stop)``, with what they scored."""
+
+    video: int
+    start: int
+    stop: int
+    motion: float      # mean lower-face motion, eye distances per frame
+    residual: float    # median pose residual, eye distances
+
+    def __len__(self) -> int:
+        return self.stop - self.start
+
+
+def best_window(cost: np.ndarray, length: int) -> Tuple[int, int]:
+    """``(start, stop)`` of the ``length``-frame window of least summed ``cost`` (NaN: not allowed).
+
+    Returns ``(0, 0)`` when no window is free of NaN.
+    """
+    c = np.asarray(cost, np.float64)
+    bad = ~np.isfinite(c)
+    c = np.where(bad, 0.0, c)
+    if len(c) < length or length < 1:
+        return 0, 0
+    s = np.concatenate([[0.0], np.cumsum(c)])
+    b = np.concatenate([[0], np.cumsum(bad)])
+    sums = s[length:] - s[:-length]
+    sums[(b[length:] - b[:-length]) > 0] = np.inf
+    i = int(np.argmin(sums))
+    if not np.isfinite(sums[i]):
+        return 0, 0
+    return i, i + length
+
+
+def lower_face_motion(points: np.ndarray) -> np.ndarray:
+    """Per frame, how far the jaw and lips moved since the frame before, eye distances (NaN
+    where either frame lacks a face; frame 0 is 0)."""
+    from ..face import measure as M
+
+    jaw = _jaw_drop(points)
+    opening = M.lip_opening(points)
+    out = np.zeros(len(points))
+    out[1:] = np.abs(np.diff(jaw)) + np.abs(np.diff(opening))
+    return out
+
+
+def _jaw_drop(points: np.ndarray) -> np.ndarray:
+    """Chin (152) below the nose tip (4), over the eye distance."""
+    from ..face.measure import eye_distance
+
+    p = np.asarray(points, np.float64)
+    return np.hypot(*(p[:, 152, :2] - p[:, 4, :2]).T) / eye_distance(p)
+
+
+def choose_stretch(footage, fps_of=None) -> Stretch:
+    """The best idle stretch of the footage (see the module docstring)."""
+    best = None
+    for v, (tr, reg) in enumerate(zip(footage.tracks, footage.regs)):
+        n = len(tr)
+        length = min(n, int(round(PLATE_SECONDS * tr.fps)))
+        cost = lower_face_motion(tr.points) + RESIDUAL_WEIGHT * reg.residual
+        cost[~tr.found] = np.nan
+        # the first frame of a run has no motion before it: its cost is its residual only
+        a, b = best_window(cost, length)
+        while b == 0 and length > 2:  # the face lost somewhere in every window: shorter
+            length = length * 3 // 4
+            a, b = best_window(cost, length)
+        if b == 0:
+            continue
+        score = float(np.mean(cost[a:b]))
+        s = Stretch(video=v, start=a, stop=b, motion=float(np.nanmean(lower_face_motion(tr.points)[a:b])),
+                    residual=float(np.nanmedian(reg.residual[a:b])))
+        # longer first (more life), then stiller
+        key = (-len(s), score)
+        if best is None or key < best[0]:
+            best = (key, s)
+    if best is None:
+        raise ValueError("no stretch of video with the face in every frame")
+    return best[1]
+
+
+def stretch_poses(framing, reg, start: int, stop: int) -> Tuple[np.ndarray, np.ndarray]:
+    """The plate's cut (2x3, video pixels -> plate pixels, one for the whole stretch: its
+    mean pose) and each frame's pose (``(N, 2, 3)``, bank pixels -> plate pixels)."""
+    from ..composite.plate import compose, pose_inverse
+    from .stabilise import Registration
+
+    idx = np.arange(start, stop)
+    mean = Registration(c=np.array([reg.c[idx].mean()]), t=np.array([reg.t[idx].mean()]),
+                        residual=np.zeros(1))
+    cut = framing.matrix(mean, 0)
+    poses = np.stack([compose(cut, pose_inverse(framing.matrix(reg, int(f)))) for f in idx])
+    return cut, poses
+
+
+def write_plate(folder: Path, footage, pictures, rest, cfg) -> str:
+    """Write the plate files into ``folder`` and return the bank.yaml lines that name them
+    (``rest``: the :class:`~lipsync.videobank.select.Candidate` the rest picture shows)."""
+    import cv2
+
+    from ..composite.face import mask_from_mesh
+    from ..encode import open_writer
+    from .cut import grab_frames, warp_frame
+    from .write import write_png
+
+    s = choose_stretch(footage)
+    src, tr, reg = footage.sources[s.video], footage.tracks[s.video], footage.regs[s.video]
+    framing = pictures.framing
+    w, h = framing.size
+    cut, poses = stretch_poses(framing, reg, s.start, s.stop)
+    frames = grab_frames(src.path, range(s.start, s.stop))
+    with open_writer(folder / VIDEO_NAME, fps=tr.fps, size=(w, h), format="mp4", crf=PLATE_CRF,
+                     preset="talking-head", quiet=True, frames=len(s)) as writer:
+        for f in range(s.start, s.stop):
+            writer.write(warp_frame(frames[f], cut, (w, h)))
+    mask = mask_from_mesh(list(pictures.points.values()), (h, w))
+    write_png(folder / MASK_NAME, cv2.cvtColor(np.round(mask * 255).astype(np.uint8), cv2.COLOR_GRAY2RGB))
+    doc = {"fps": tr.fps, "frames": len(s), "size": [w, h],
+           "source": {"video": src.name, "start_frame": s.start, "stop_frame": s.stop,
+                      "lower_face_motion": round(s.motion, 5), "pose_residual": round(s.residual, 5)},
+           "poses": [[round(float(x), 5) for x in p.ravel()] for p in poses],
+           # the rest picture's face mesh (bank pixels): the plate's colour is matched on its still skin
+           "rest_mesh": [[round(float(x), 3) for x in p[:2]] for p in pictures.points[(rest.video, rest.frame)]]}
+    (folder / POSES_NAME).write_text(json.dumps(doc) + "\n", encoding="utf-8")
+    return f"plate: {{video: {VIDEO_NAME}, poses: {POSES_NAME}, mask: {MASK_NAME}}}\n"
