@@ -266,8 +266,9 @@ def render_clip(timeline, output: PathLike, *, bank=None, audio: Optional[PathLi
 
         if is_audio_input(timeline, getattr(timeline_options, "timeline_format", None)):
             audio = timeline  # speech in: its own sound is the soundtrack
+    # the idle plate (a bank made from video) only where the frame is the bank's picture itself
     anim = Animator(bank, timeline, fps=fps, map=map, method=method, timing=timing, store=store,
-                    timeline_options=timeline_options)
+                    timeline_options=timeline_options, still=still or not compositor.passthrough)
     n = len(anim)
     if n == 0:  # a video needs a frame; a timeline of no length has none to show (README: Rendering)
         where = getattr(timeline, "path", None) if hasattr(timeline, "segments") else os.fspath(timeline)
@@ -280,32 +281,13 @@ def render_clip(timeline, output: PathLike, *, bank=None, audio: Optional[PathLi
         nb = anim.renderer.nb
         if any(not store.pair_path(store.pair_key(bank, a, b, nb.axis)).exists() for a, b in all_pairs(bank.names)):
             preprocess(bank, store=store, jobs=jobs, quiet=quiet, normalised=nb)
-    plate = None
-    if not still and not composite and compositor.passthrough and bank.channels == 3:
-        from .composite.plate import load_plate
-
-        plate = load_plate(bank)  # None for drawn banks and banks without one
     h, w = compositor.shape
     t1 = time.perf_counter()
     # beier-neely keeps whole-frame scratch in the renderer: one thread; the rest are thread-safe
     threads = 1 if anim.renderer.method == "beier-neely" else None
     anim.renderer.frame_threads = 1  # whole frames run in parallel instead
     encoder_threads = 1 if (os.cpu_count() or 1) <= SINGLE_ENCODER_THREAD_CORES else None
-    same_as_previous = anim.same_as_previous
-    if plate is not None:
-        import threading
-
-        import numpy as np
-
-        scratch = threading.local()  # each render thread its own mouth frame
-        same_as_previous = None       # the plate moves in every frame
-
-        def render_into(i, buf):
-            mouth = getattr(scratch, "frame", None)
-            if mouth is None:
-                mouth = scratch.frame = np.empty(anim.renderer.shape + (anim.renderer.channels,), np.uint8)
-            plate.render_into(i, fps, anim.frame(i, out=mouth), buf)
-    elif compositor.passthrough:
+    if compositor.passthrough:
         render_into = lambda i, buf: anim.frame(i, out=buf)  # noqa: E731 - straight into the buffer
     else:
         import threading
@@ -330,7 +312,7 @@ def render_clip(timeline, output: PathLike, *, bank=None, audio: Optional[PathLi
 
             render_parallel(render_into, n, (h, w, compositor.channels), writer.write_prepared,
                             threads=threads, progress=on_frame, prepare=writer.prepare,
-                            same_as_previous=same_as_previous, initial=compositor.initial)
+                            same_as_previous=anim.same_as_previous, initial=compositor.initial)
     t2 = time.perf_counter()
     return ClipReport(output=str(output), frames=len(anim), fps=float(fps), size=(w, h), method=method,
                       seconds_setup=t1 - t0, seconds_render=t2 - t1)

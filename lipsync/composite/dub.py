@@ -413,7 +413,7 @@ def dub(video: PathLike, audio: PathLike, output: PathLike, *, text: Optional[st
     t = time.perf_counter()
     if not isinstance(store, FlowStore):
         store = FlowStore.for_bank(bank, store)
-    anim = Animator.from_audio(bank, audio, text, fps=info.fps, map=map, timing=timing, store=store)
+    anim = Animator.from_audio(bank, audio, text, fps=info.fps, map=map, timing=timing, store=store, still=True)
     n = len(anim)
     if n == 0:
         raise InputError("the speech lasts 0 s: there is no frame to write", path=audio)
