@@ -11,8 +11,8 @@ The pieces, each usable alone (the render-time plate and ``lipsync dub`` use the
 * :func:`lower_face_polygon` -- the region's outline from the jaw and the nose base (mesh
   points, :func:`polygon_from_mesh`, or a bank's lines, :func:`polygon_from_lines`): the jaw
   below the level of the nose's wings, the chin, and the nose's lower edge on top;
-* :func:`lower_face_mask` -- float32 ``(H, W)`` in [0, 1]: the union of outlines, grown
-  outwards below the nose (an open jaw's chin and a closed one's both covered), feathered
+* :func:`lower_face_mask` -- float32 ``(H, W)`` in [0, 1]: the union of outlines (grown
+  outwards below the nose: an open jaw's chin and a closed one's both covered), feathered
   *inside* the outline so that nothing above the nose base changes;
 * :func:`pose_onto` -- the similarity taking one face's points onto another's by points
   around the mask's upper edge (nose base, upper cheeks, eye corners), so the pasted lower
@@ -36,7 +36,8 @@ Examples
 
 from __future__ import annotations
 
-from typing import Mapping, Optional, Sequence, Tuple
+from dataclasses import dataclass
+from typing import Mapping, Sequence, Tuple
 
 import numpy as np
 
@@ -84,8 +85,8 @@ def _level_crossing(line: np.ndarray, down: np.ndarray, level: float) -> np.ndar
     return np.vstack([a + t * (b - a), line[k:]])
 
 
-def lower_face_polygon(jaw_l: np.ndarray, jaw_r: np.ndarray, nose_base_l: np.ndarray, nose_base_r: np.ndarray
-                       ) -> np.ndarray:
+def lower_face_polygon(jaw_l: np.ndarray, jaw_r: np.ndarray, nose_base_l: np.ndarray, nose_base_r: np.ndarray, *,
+                       grow: float = 0.0) -> np.ndarray:
     """The lower face's outline, ``(K, 2)`` pixels, from the jaw and the nose's lower edge.
 
     Parameters
@@ -95,6 +96,9 @@ def lower_face_polygon(jaw_l: np.ndarray, jaw_r: np.ndarray, nose_base_l: np.nda
         :data:`~lipsync.face.topology.JAW_L`, a bank's ``jaw_l`` line).
     nose_base_l, nose_base_r : numpy.ndarray
         ``(M, 2)`` the nose's lower edge from each wing to the point under the tip.
+    grow : float
+        Pixels the jaw and chin are pushed outwards (each point along the jaw's outward
+        normal; the two ends at the wings' level sideways, keeping the top edge's height).
 
     Returns
     -------
@@ -117,23 +121,34 @@ def lower_face_polygon(jaw_l: np.ndarray, jaw_r: np.ndarray, nose_base_l: np.nda
     level = float(np.mean([nl[0] @ down, nr[0] @ down]))
     left = _level_crossing(jl, down, level)
     right = _level_crossing(jr, down, level)
-    return np.vstack([left, right[::-1][1:] if np.allclose(right[-1], left[-1]) else right[::-1], nr, nl[::-1][1:]])
+    jaw = np.vstack([left, right[::-1][1:] if np.allclose(right[-1], left[-1]) else right[::-1]])
+    if grow > 0 and len(jaw) > 2:
+        tangent = np.gradient(jaw, axis=0)
+        normal = np.stack([tangent[:, 1], -tangent[:, 0]], axis=1)
+        normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-12)
+        centre = np.vstack([nl, nr]).mean(axis=0)
+        normal *= np.where(((jaw - centre) * normal).sum(axis=1, keepdims=True) < 0, -1.0, 1.0)
+        jaw = jaw + grow * normal
+        jaw[0] = left[0] - grow * across
+        jaw[-1] = right[0] + grow * across
+    return np.vstack([jaw, nr, nl[::-1][1:]])
 
 
-def polygon_from_mesh(points: np.ndarray) -> np.ndarray:
+def polygon_from_mesh(points: np.ndarray, *, grow: float = 0.0) -> np.ndarray:
     """:func:`lower_face_polygon` of a 468-point face mesh (picture pixels)."""
     p = np.asarray(points, np.float64)[:, :2]
-    return lower_face_polygon(p[list(JAW[0])], p[list(JAW[1])], p[list(NOSE_BASE[0])], p[list(NOSE_BASE[1])])
+    return lower_face_polygon(p[list(JAW[0])], p[list(JAW[1])], p[list(NOSE_BASE[0])], p[list(NOSE_BASE[1])],
+                              grow=grow)
 
 
-def polygon_from_lines(lines: Mapping[str, object]) -> np.ndarray:
+def polygon_from_lines(lines: Mapping[str, object], *, grow: float = 0.0) -> np.ndarray:
     """:func:`lower_face_polygon` of a bank viseme's face lines (``jaw_l``, ``jaw_r``,
     ``nose_base_l``, ``nose_base_r``: :class:`~lipsync.bank.Feature` or ``(N, 2)`` arrays)."""
     def pts(name):
         f = lines[name]
         return np.asarray(getattr(f, "points", f), np.float64)
 
-    return lower_face_polygon(pts("jaw_l"), pts("jaw_r"), pts("nose_base_l"), pts("nose_base_r"))
+    return lower_face_polygon(pts("jaw_l"), pts("jaw_r"), pts("nose_base_l"), pts("nose_base_r"), grow=grow)
 
 
 def eye_distance_of_lines(lines: Mapping[str, object]) -> float:
@@ -145,23 +160,20 @@ def eye_distance_of_lines(lines: Mapping[str, object]) -> float:
     return float(np.linalg.norm(centre("r") - centre("l")))
 
 
-def lower_face_mask(polygons: Sequence[np.ndarray], shape: Tuple[int, int], *, feather: float,
-                    grow: float = 0.0) -> np.ndarray:
+def lower_face_mask(polygons: Sequence[np.ndarray], shape: Tuple[int, int], *, feather: float) -> np.ndarray:
     """The feathered lower-face mask: float32 ``(H, W)``, 1 = the pasted face, 0 = the plate.
 
     Parameters
     ----------
     polygons : sequence of numpy.ndarray
-        ``(K, 2)`` outlines in pixels (:func:`lower_face_polygon`); the mask covers their union
-        (the plate's and every pasted frame's).
+        ``(K, 2)`` outlines in pixels (:func:`lower_face_polygon`, grown as wanted); the mask
+        covers their union (the plate's and every pasted frame's): a mask of more outlines
+        is 0 in fewer places.
     shape : (int, int)
         ``(H, W)``.
     feather : float
         Pixels from the outline inwards over which the mask rises from 0 to 1 (smoothstep of
         the distance to the outline): the mask is exactly 0 on and outside the outline.
-    grow : float
-        Pixels the union is grown by (a disc) before feathering, below its top edge only:
-        nothing above the highest of the outlines' top edges (the nose base) is ever covered.
 
     Returns
     -------
@@ -177,10 +189,6 @@ def lower_face_mask(polygons: Sequence[np.ndarray], shape: Tuple[int, int], *, f
     >>> float(m[25, 30]), float(m[25, 9]), round(float(m[25, 12]), 2)
     (1.0, 0.0, 0.5)
     """
-    return _mask(polygons, shape, feather, grow)
-
-
-def _mask(polygons, shape, feather: float, grow: float) -> np.ndarray:
     import cv2
 
     h, w = shape
@@ -189,15 +197,6 @@ def _mask(polygons, shape, feather: float, grow: float) -> np.ndarray:
         p = np.asarray(poly, np.float64)[:, :2]
         # pixel centres inside the outline (fixed point: a quarter-pixel outline is not rounded away)
         cv2.fillPoly(area, [np.round(p * 16).astype(np.int32)], 1, lineType=cv2.LINE_8, shift=4)
-    if grow > 0 and area.any():
-        r = int(np.ceil(grow))
-        grown = cv2.dilate(area, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1)))
-        top = np.min([_top_edge(np.asarray(p, np.float64)[:, :2], w) for p in polygons], axis=0)
-        ok = np.isfinite(top)
-        # beyond the outlines' sides the top edge continues at the height of their ends
-        top = np.interp(np.arange(w), np.nonzero(ok)[0], top[ok])
-        grown[np.arange(h)[:, None] < top[None, :]] = 0
-        area = np.maximum(area, grown)
     if feather <= 0:
         return area.astype(np.float32)
     dist = cv2.distanceTransform(area, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
@@ -205,21 +204,6 @@ def _mask(polygons, shape, feather: float, grow: float) -> np.ndarray:
     # ramp is feather pixels long from there
     t = np.clip((dist - 1.0) / feather, 0.0, 1.0)
     return (t * t * (3 - 2 * t)).astype(np.float32)
-
-
-def _top_edge(poly: np.ndarray, w: int) -> np.ndarray:
-    """Per column, the smallest y the polygon's boundary reaches there (inf where none)."""
-    ys = np.full(w, np.inf)
-    q = np.vstack([poly, poly[:1]])
-    for a, b in zip(q[:-1], q[1:]):
-        x0, x1 = sorted((a[0], b[0]))
-        cols = np.arange(max(0, int(np.ceil(x0))), min(w, int(np.floor(x1)) + 1))
-        if cols.size == 0:
-            continue
-        t = (cols - a[0]) / (b[0] - a[0]) if b[0] != a[0] else np.zeros(cols.size)
-        y = a[1] + t * (b[1] - a[1])
-        ys[cols] = np.minimum(ys[cols], y)
-    return ys
 
 
 def mask_from_mesh(meshes: Sequence[np.ndarray], shape: Tuple[int, int], *, feather: float = FEATHER,
@@ -242,7 +226,7 @@ def mask_from_mesh(meshes: Sequence[np.ndarray], shape: Tuple[int, int], *, feat
     from ..face.measure import eye_distance
 
     d = float(eye_distance(np.asarray(meshes[0], np.float64)))
-    return lower_face_mask([polygon_from_mesh(p) for p in meshes], shape, feather=feather * d, grow=grow * d)
+    return lower_face_mask([polygon_from_mesh(p, grow=grow * d) for p in meshes], shape, feather=feather * d)
 
 
 def mask_from_lines(visemes: Sequence[Mapping[str, object]], shape: Tuple[int, int], *, feather: float = FEATHER,
@@ -250,12 +234,12 @@ def mask_from_lines(visemes: Sequence[Mapping[str, object]], shape: Tuple[int, i
     """:func:`lower_face_mask` of the union of bank visemes' face lines (``bank.features[v]``),
     ``feather`` and ``grow`` in eye distances (of the first viseme's eye lines)."""
     d = eye_distance_of_lines(visemes[0])
-    return lower_face_mask([polygon_from_lines(f) for f in visemes], shape, feather=feather * d, grow=grow * d)
+    return lower_face_mask([polygon_from_lines(f, grow=grow * d) for f in visemes], shape, feather=feather * d)
 
 
 def pose_onto(points: np.ndarray, target: np.ndarray, *, anchors: Sequence[int] = ANCHORS) -> np.ndarray:
     """The 2x3 similarity (rotation, scale, shift) taking mesh ``points`` onto ``target`` by
-    the ``anchors`` (least squares; :func:`lipsync.videobank.stabilise.fit_similarity`).
+    the ``anchors`` (least squares, as :func:`lipsync.videobank.stabilise.fit_similarity`).
 
     Examples
     --------
@@ -265,12 +249,14 @@ def pose_onto(points: np.ndarray, target: np.ndarray, *, anchors: Sequence[int] 
     >>> np.allclose(p @ m[:, :2].T + m[:, 2], q)
     True
     """
-    from ..videobank.stabilise import fit_similarity
-
     a = np.asarray(points, np.float64)[list(anchors), :2]
     b = np.asarray(target, np.float64)[list(anchors), :2]
-    c, t, _ = fit_similarity((a[:, 0] + 1j * a[:, 1])[None], b[:, 0] + 1j * b[:, 1])
-    c, t = complex(c[0]), complex(t[0])
+    # Umeyama's closed form without reflections, as complex numbers (the stabilisation's
+    # fit; not imported from lipsync.videobank, which sits above this room)
+    za, zb = a[:, 0] + 1j * a[:, 1], b[:, 0] + 1j * b[:, 1]
+    ca, cb = za - za.mean(), zb - zb.mean()
+    c = complex((np.conj(ca) * cb).sum() / max(float((np.abs(ca) ** 2).sum()), 1e-300))
+    t = complex(zb.mean() - c * za.mean())
     return np.array([[c.real, -c.imag, t.real], [c.imag, c.real, t.imag]])
 
 
@@ -283,15 +269,38 @@ def skin_ring(mask: np.ndarray, width: float) -> np.ndarray:
     return (outside > 0) & (dist <= max(width, 1.0))
 
 
-def colour_match(source: np.ndarray, target: np.ndarray, where: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
+def face_area(points: np.ndarray, shape: Tuple[int, int]) -> np.ndarray:
+    """Boolean ``(H, W)``: inside the face's outline (the jaw and the upper outline of a
+    468-point mesh): the skin ring is matched on skin, not on the background or a collar
+    beside the jaw."""
+    import cv2
+
+    p = np.asarray(points, np.float64)[:, :2]
+    outline = np.vstack([p[list(T.JAW_L)], p[list(T.JAW_R[::-1])], p[list(T.FACE_UPPER_R)], p[list(T.FACE_UPPER_L[::-1])]])
+    area = np.zeros(shape, np.uint8)
+    cv2.fillPoly(area, [np.round(outline * 16).astype(np.int32)], 1, shift=4)
+    return area.astype(bool)
+
+
+def colour_match(source: np.ndarray, target: np.ndarray, where: np.ndarray, *, offset: bool = False
+                 ) -> Tuple[np.ndarray, np.ndarray]:
     """Per-channel ``gain, offset`` (each ``(3,)``) bringing ``source``'s pixels in ``where`` to
-    ``target``'s (least squares; gains clipped to :data:`GAIN_RANGE`, the offset refitted).
+    ``target``'s; gains clipped to :data:`GAIN_RANGE`.
+
+    Without ``offset`` (the default) the gain is the ratio of the means and the offset 0: a
+    camera's exposure and white balance drift is a gain per channel (exact for its power-law
+    tone curve, :mod:`lipsync.videobank.colour`), and a ratio of means is not pulled by the
+    few pixels of the ring that differ for another reason (a collar, a strand of hair). With
+    ``offset``, the least-squares line per channel (gain and black level).
 
     Examples
     --------
     >>> a = np.random.default_rng(0).integers(40, 200, (8, 8, 3)).astype(np.uint8)
+    >>> g, o = colour_match(a, np.round(a * 0.9).astype(np.uint8), np.ones((8, 8), bool))
+    >>> np.allclose(g, 0.9, atol=0.005), o.tolist()
+    (True, [0.0, 0.0, 0.0])
     >>> b = np.clip(a * 1.1 + 5, 0, 255).round().astype(np.uint8)
-    >>> g, o = colour_match(a, b, np.ones((8, 8), bool))
+    >>> g, o = colour_match(a, b, np.ones((8, 8), bool), offset=True)
     >>> np.allclose(g, 1.1, atol=0.01), np.allclose(o, 5, atol=1.0)
     (True, True)
     """
@@ -300,6 +309,8 @@ def colour_match(source: np.ndarray, target: np.ndarray, where: np.ndarray) -> T
     if len(s) < 8:
         return np.ones(3), np.zeros(3)
     ms, mt = s.mean(axis=0), t.mean(axis=0)
+    if not offset:
+        return np.clip(mt / np.maximum(ms, 1.0), *GAIN_RANGE), np.zeros(3)
     var = ((s - ms) ** 2).mean(axis=0)
     gain = np.where(var > 1.0, ((s - ms) * (t - mt)).mean(axis=0) / np.maximum(var, 1e-9), 1.0)
     gain = np.clip(gain, *GAIN_RANGE)
@@ -349,3 +360,73 @@ def paste(plate: np.ndarray, face: np.ndarray, mask: np.ndarray, *, method: str 
     out = np.clip(np.round(out), 0, 255).astype(np.uint8)
     out[m <= 0] = plate[m <= 0]
     return out
+
+
+@dataclass(frozen=True)
+class Pasted:
+    """A picture made by :func:`onto_plate`.
+
+    Attributes
+    ----------
+    image : numpy.ndarray
+        The plate with the lower face pasted in.
+    points : numpy.ndarray
+        Its face mesh: the plate's where the mask is 0, the pasted face's where it is 1, in
+        between by the mask (so lines placed from it match the picture).
+    mask : numpy.ndarray
+        The mask used (float32 ``(H, W)``).
+    gain, offset : numpy.ndarray
+        The colour match applied to the pasted face (:func:`colour_match`).
+    """
+
+    image: np.ndarray
+    points: np.ndarray
+    mask: np.ndarray
+    gain: np.ndarray
+    offset: np.ndarray
+
+
+def onto_plate(plate: np.ndarray, plate_points: np.ndarray, image: np.ndarray, points: np.ndarray, *,
+               method: str = "alpha") -> Pasted:
+    """``image``'s lower face pasted onto ``plate`` (both already on one pose: the cut of a
+    video bank, or :func:`pose_onto` with ``cv2.warpAffine``).
+
+    The mask is the union of both faces' lower-face outlines (:func:`mask_from_mesh`); the
+    colour is matched on the plate's skin just outside it (:data:`RING`); the blend is
+    :func:`paste`.
+
+    Examples
+    --------
+    >>> p = np.zeros((468, 2))
+    >>> p[list(JAW[0])] = np.c_[np.linspace(20, 50, 11), np.linspace(40, 90, 11)]
+    >>> p[list(JAW[1])] = np.c_[np.linspace(80, 50, 11), np.linspace(40, 90, 11)]
+    >>> p[list(NOSE_BASE[0])] = [[40, 50], [45, 51], [50, 52]]; p[list(NOSE_BASE[1])] = [[60, 50], [55, 51], [50, 52]]
+    >>> p[list(T.EYE_UPPER_L + T.EYE_LOWER_L)] = [30, 30]; p[list(T.EYE_UPPER_R + T.EYE_LOWER_R)] = [70, 30]
+    >>> plate = np.full((100, 100, 3), 100, np.uint8); face = np.full((100, 100, 3), 100, np.uint8)
+    >>> face[60:80, 40:60] = 20                                   # a dark mouth
+    >>> r = onto_plate(plate, p, face, p)
+    >>> r.image[70, 50].tolist(), r.image[20, 50].tolist(), bool((r.points == p).all())
+    ([20, 20, 20], [100, 100, 100], True)
+    """
+    from ..face.measure import eye_distance
+
+    h, w = plate.shape[:2]
+    p, q = np.asarray(plate_points, np.float64), np.asarray(points, np.float64)
+
+    def merged_by(mask: np.ndarray) -> np.ndarray:
+        xy = np.round(q[:, :2]).astype(int)
+        inside = (xy[:, 0] >= 0) & (xy[:, 0] < w) & (xy[:, 1] >= 0) & (xy[:, 1] < h)
+        m = np.zeros(len(q))
+        m[inside] = mask[xy[inside, 1], xy[inside, 0]]
+        # rounded as bank.yaml writes them (1/1000 px): the mask made again from the
+        # written lines is this one
+        return np.round(p + m[:, None] * (q - p), 3)
+
+    # the points follow the pasted face by the mask; the mask that is used is the one of the
+    # merged points (and the plate's), so a bank's lines give back exactly this mask
+    merged = merged_by(mask_from_mesh([p, q], (h, w)))
+    mask = mask_from_mesh([p, merged], (h, w))
+    d = float(eye_distance(p))
+    gain, offset = colour_match(image, plate, skin_ring(mask, RING * d) & face_area(p, (h, w)))
+    out = paste(plate, apply_colour(image, gain, offset), mask, method=method)
+    return Pasted(image=out, points=merged, mask=mask, gain=gain, offset=offset)

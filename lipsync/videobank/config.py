@@ -51,6 +51,10 @@ class VideoBankConfig:
         Processes for the flows (default: all cores).
     flows : bool
         Compute the flows (a bank ready to render); off only for tests of the other steps.
+    one_face : bool
+        Every viseme's picture is the rest picture (the *plate*, eyes open) outside the
+        lower face, with the chosen frame's mouth, jaw and chin pasted in
+        (:mod:`lipsync.composite.face`); off: each picture is its own whole frame.
     """
 
     map: str = DEFAULT_MAP
@@ -60,6 +64,7 @@ class VideoBankConfig:
     quiet: bool = True
     jobs: Optional[int] = None
     flows: bool = True
+    one_face: bool = True
 
     def __post_init__(self):
         if self.size is not None:

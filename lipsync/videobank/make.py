@@ -91,6 +91,7 @@ class Pictures:
     framing: "stabilise.Framing"
     images: Dict[tuple, np.ndarray]   # (video, frame) -> RGB picture
     points: Dict[tuple, np.ndarray]   # (video, frame) -> mesh in the picture's pixels
+    plate: Optional[tuple] = None     # (video, frame) of the plate every picture shares (one face)
 
 
 #: How a real face's mouth moves when a render does not say (bank.yaml ``timing``): the
@@ -200,9 +201,12 @@ def make_bank(outdir: PathLike, videos: Sequence[PathLike], *, text: Optional[st
                          closures=pmap.closures)
     if pmap.silence not in ranked:
         raise InputError(f"no face in the pauses to take the rest shape ({pmap.silence}) from", path=footage.names)
+    if cfg.one_face:
+        ranked[pmap.silence] = select.for_plate(ranked[pmap.silence])
     seconds["select"] = time.perf_counter() - t
     t = time.perf_counter()
-    pictures = cut_and_choose(footage, {v: r[:select.FINALISTS] for v, r in ranked.items()}, cfg)
+    pictures = cut_and_choose(footage, {v: r[:select.FINALISTS] for v, r in ranked.items()}, cfg,
+                              plate=pmap.silence if cfg.one_face else None)
     seconds["cut"] = time.perf_counter() - t
     return assemble(outdir, footage, ranked, pictures, pmap, cfg, seconds)
 
@@ -253,10 +257,16 @@ def observe(sources: List[Source], pmap, cfg: VideoBankConfig, seconds: Dict[str
     return Footage(sources=sources, speeches=speeches, tracks=tracks, regs=regs)
 
 
-def cut_and_choose(footage: Footage, finalists: Dict[str, List[Candidate]], cfg: VideoBankConfig) -> Pictures:
+def cut_and_choose(footage: Footage, finalists: Dict[str, List[Candidate]], cfg: VideoBankConfig, *,
+                   plate: Optional[str] = None) -> Pictures:
     """Cut the finalists out of the videos, choose each viseme's sharpest best, and cut the
     chosen frames again at a framing fitted to them alone (more room for the neck and
-    shoulders than all finalists share)."""
+    shoulders than all finalists share).
+
+    With ``plate`` (the rest viseme: one face), each chosen frame is cut on the plate's pose
+    around the mouth (:func:`lipsync.composite.face.pose_onto`: the similarity left between
+    its nose base and upper cheeks and the plate's, after the stabilisation), composed into
+    the one warp of the cut: each picture is resampled once from the video."""
     from ..face.compare import mouth_box
     from .cut import RAW_BUDGET_BYTES, grab_frames, warp_frame
 
@@ -272,7 +282,8 @@ def cut_and_choose(footage: Footage, finalists: Dict[str, List[Candidate]], cfg:
     def points(fr: "stabilise.Framing", c: Candidate) -> np.ndarray:
         return fr.points(regs[c.video], c.frame, tracks[c.video].points[c.frame])
 
-    def cut(fr: "stabilise.Framing", cands: List[Candidate], raw: Dict[tuple, np.ndarray], keep: bool):
+    def cut(fr: "stabilise.Framing", cands: List[Candidate], raw: Dict[tuple, np.ndarray], keep: bool,
+            fix: Optional[Dict[tuple, np.ndarray]] = None):
         out = {}
         for i, s in enumerate(src):
             wanted = sorted({c.frame for c in cands if c.video == i})
@@ -281,7 +292,10 @@ def cut_and_choose(footage: Footage, finalists: Dict[str, List[Candidate]], cfg:
             for f, img in got.items():
                 if keep:
                     raw[(i, f)] = img
-                out[(i, f)] = warp_frame(img, fr.matrix(regs[i], f), fr.size)
+                m = fr.matrix(regs[i], f)
+                if fix is not None:
+                    m = _compose(fix[(i, f)], m)
+                out[(i, f)] = warp_frame(img, m, fr.size)
         return out
 
     frame = framing_for(flat)
@@ -295,14 +309,31 @@ def cut_and_choose(footage: Footage, finalists: Dict[str, List[Candidate]], cfg:
         chosen[v] = select.with_sharpness(fs, sharp)[0]
     picked = list({(c.video, c.frame): c for c in chosen.values()}.values())
     final = framing_for(picked)
-    if final != frame:
+    pts = {(c.video, c.frame): points(final, c) for c in picked}
+    key = None
+    if plate is not None and plate in chosen:
+        from ..composite.face import pose_onto
+
+        key = (chosen[plate].video, chosen[plate].frame)
+        fix = {k: pose_onto(p, pts[key]) for k, p in pts.items()}
+        fix[key] = np.array([[1.0, 0, 0], [0, 1.0, 0]])
+        images = cut(final, picked, raw, False, fix)
+        pts = {k: p[..., :2] @ fix[k][:, :2].T + fix[k][:, 2] if p.shape[-1] == 2 else
+               np.concatenate([p[..., :2] @ fix[k][:, :2].T + fix[k][:, 2],
+                               p[..., 2:] * float(np.hypot(*fix[k][:, 0]))], axis=-1) for k, p in pts.items()}
+    elif final != frame:
         images = cut(final, picked, raw, False)
     if final.cut:
         warnings.warn(f"{footage.names}: the picture cuts the head at the {' and '.join(final.cut)} (keep the whole "
                       f"head and the neck in view, with some room around them); the bank is cropped tighter",
                       UserWarning, stacklevel=3)
     return Pictures(chosen=chosen, framing=final, images={(c.video, c.frame): images[(c.video, c.frame)] for c in picked},
-                    points={(c.video, c.frame): points(final, c) for c in picked})
+                    points=pts, plate=key)
+
+
+def _compose(first: np.ndarray, m: np.ndarray) -> np.ndarray:
+    """The 2x3 affine doing ``m`` first, then ``first``."""
+    return first[:, :2] @ m + np.array([[0, 0, first[0, 2]], [0, 0, first[1, 2]]])
 
 
 def assemble(outdir: Path, footage: Footage, ranked: Dict[str, List[Candidate]], pictures: Pictures, pmap,
@@ -332,13 +363,26 @@ def assemble(outdir: Path, footage: Footage, ranked: Dict[str, List[Candidate]],
                       f"rendered head will wobble. Record facing the camera with the head still, or more of it "
                       f"to choose from", UserWarning, stacklevel=3)
 
-    # the chosen pictures matched on the still skin
     keys = list(pictures.images)
-    masks = {k: colour.still_skin_mask(pictures.points[k], (h, w)) for k in keys}
-    matched, gains = colour.match_colour(pictures.images, masks, where=names)
+    points = dict(pictures.points)
+    if pictures.plate is not None:
+        # one face: every picture is the plate outside its lower face (composite.face)
+        from ..composite.face import onto_plate
 
-    # lines from each picture's own face
-    pts = {v: pictures.points[(c.video, c.frame)] for v, c in source_of.items()}
+        plate, plate_points = pictures.images[pictures.plate], pictures.points[pictures.plate]
+        matched, gains = {pictures.plate: plate}, {pictures.plate: (1.0, 1.0, 1.0)}
+        for k in keys:
+            if k != pictures.plate:
+                pasted = onto_plate(plate, plate_points, pictures.images[k], pictures.points[k])
+                matched[k], points[k] = pasted.image, pasted.points
+                gains[k] = tuple(round(float(x), 4) for x in pasted.gain)
+    else:
+        # the chosen pictures matched on the still skin
+        masks = {k: colour.still_skin_mask(pictures.points[k], (h, w)) for k in keys}
+        matched, gains = colour.match_colour(pictures.images, masks, where=names)
+
+    # lines from each picture's own face (one face: the plate's above the mouth)
+    pts = {v: points[(c.video, c.frame)] for v, c in source_of.items()}
     asym = face_asymmetry(list(pts.values()))
     symmetric = asym < SYMMETRIC_BELOW
     features = face_features(pts, (h, w), axis=frame.axis)
@@ -364,6 +408,11 @@ def assemble(outdir: Path, footage: Footage, ranked: Dict[str, List[Candidate]],
         "missing": {v: {"uses": u, "record": _what_to_record([v], pmap)} for v, u in missing.items()},
         "timing": TIMING,
     }
+    if pictures.plate is not None:
+        pc = next(c for c in chosen.values() if (c.video, c.frame) == pictures.plate)
+        report["face_plate"] = {"video": footage.sources[pc.video].name, "frame": pc.frame, "time": round(pc.time, 3),
+                                "viseme": pc.viseme, "eyes": round(pc.eyes, 4),
+                                "what": "every picture shows this frame outside its lower face"}
     for v in order:
         c = source_of[v]
         report["visemes"][v] = dict(image=files[v], video=footage.sources[c.video].name, **c.report(),

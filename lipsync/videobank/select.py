@@ -94,6 +94,11 @@ EYES_WEIGHT = 1.0
 #: How many of each viseme's best-ranked candidates are cut out of the video and judged on
 #: sharpness (decoding them again costs one pass over the video).
 FINALISTS = 6
+#: The rest viseme's picture is the bank's *plate*: every other viseme shows its eyes, hair
+#: and clothes (:mod:`lipsync.composite.face`), so its eyes must be open, not merely
+#: unblinking: eyes less open than the video's median cost this many spreads per unit
+#: (eyes at 0.8 of the median cost 0.8, as much as a mouth shape 0.8 spreads off).
+PLATE_EYES_WEIGHT = 4.0
 
 #: For each Rhubarb mouth shape, the other shapes from most to least alike (by opening,
 #: rounding and what touches the lips), for a viseme the video never shows. Names of other
@@ -247,6 +252,24 @@ def rank(cands: Sequence[Candidate], measures: Sequence[FrameMeasures], *,
         open_eyes = [c for c in scored if c.eyes >= BLINK_BELOW]
         out[v] = sorted(open_eyes or scored, key=lambda c: c.score)
     return out
+
+
+def for_plate(ranked: Sequence[Candidate]) -> List[Candidate]:
+    """The rest viseme's candidates re-ranked for the plate every viseme shares: eyes open
+    (:data:`PLATE_EYES_WEIGHT`) on top of the rest's own ranking (a relaxed closed mouth,
+    still, a low residual).
+
+    Examples
+    --------
+    >>> a = Candidate(video=0, frame=1, time=0.04, viseme="X", span=(0, 1), eyes=0.8, score=1.0)
+    >>> b = Candidate(video=0, frame=2, time=0.08, viseme="X", span=(0, 1), eyes=1.05, score=1.5)
+    >>> [c.frame for c in for_plate([a, b])]
+    [2, 1]
+    """
+    def plate_score(c: Candidate) -> float:
+        return c.score + PLATE_EYES_WEIGHT * max(0.0, 1.0 - c.eyes)
+
+    return [replace(c, score=plate_score(c)) for c in sorted(ranked, key=plate_score)]
 
 
 def with_sharpness(finalists: Sequence[Candidate], sharpness: Sequence[float]) -> List[Candidate]:
