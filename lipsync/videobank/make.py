@@ -432,7 +432,7 @@ def assemble(outdir: Path, footage: Footage, ranked: Dict[str, List[Candidate]],
         text_yaml = write.bank_text(outdir.resolve().name, pmap.silence, files, features, symmetric=symmetric,
                                     header=header, timing=TIMING)
         from .plate import write_plate
-        text_yaml += write_plate(tmp, footage, pictures, source_of[pmap.silence], cfg)  # the idle plate (issue 28)
+        text_yaml += write_plate(tmp, footage, pictures.framing, pts, pmap.silence)  # the idle plate (issue 28)
         Bank.from_text(text_yaml, tmp, images=images)  # never write a bank that would not load
         write_bank_text(tmp / "bank.yaml", text_yaml)
         bank = Bank.load(tmp)

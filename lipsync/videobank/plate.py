@@ -150,9 +150,12 @@ def stretch_poses(framing, reg, start: int, stop: int) -> Tuple[np.ndarray, np.n
     return cut, poses
 
 
-def write_plate(folder: Path, footage, pictures, rest, cfg) -> str:
-    """Write the plate files into ``folder`` and return the bank.yaml lines that name them
-    (``rest``: the :class:`~lipsync.videobank.select.Candidate` the rest picture shows)."""
+def write_plate(folder: Path, footage, framing, meshes, rest: str) -> str:
+    """Write the plate files into ``folder`` and return the bank.yaml lines that name them.
+
+    ``framing`` is the bank pictures' (:class:`~lipsync.videobank.stabilise.Framing`),
+    ``meshes`` each viseme's face mesh in its picture's pixels, ``rest`` the rest viseme.
+    """
     import cv2
 
     from ..composite.face import mask_from_mesh
@@ -162,7 +165,6 @@ def write_plate(folder: Path, footage, pictures, rest, cfg) -> str:
 
     s = choose_stretch(footage)
     src, tr, reg = footage.sources[s.video], footage.tracks[s.video], footage.regs[s.video]
-    framing = pictures.framing
     w, h = framing.size
     cut, poses = stretch_poses(framing, reg, s.start, s.stop)
     frames = grab_frames(src.path, range(s.start, s.stop))
@@ -170,13 +172,13 @@ def write_plate(folder: Path, footage, pictures, rest, cfg) -> str:
                      preset="talking-head", quiet=True, frames=len(s)) as writer:
         for f in range(s.start, s.stop):
             writer.write(warp_frame(frames[f], cut, (w, h)))
-    mask = mask_from_mesh(list(pictures.points.values()), (h, w))
+    mask = mask_from_mesh(list(meshes.values()), (h, w))
     write_png(folder / MASK_NAME, cv2.cvtColor(np.round(mask * 255).astype(np.uint8), cv2.COLOR_GRAY2RGB))
     doc = {"fps": tr.fps, "frames": len(s), "size": [w, h],
            "source": {"video": src.name, "start_frame": s.start, "stop_frame": s.stop,
                       "lower_face_motion": round(s.motion, 5), "pose_residual": round(s.residual, 5)},
            "poses": [[round(float(x), 5) for x in p.ravel()] for p in poses],
            # the rest picture's face mesh (bank pixels): the plate's colour is matched on its still skin
-           "rest_mesh": [[round(float(x), 3) for x in p[:2]] for p in pictures.points[(rest.video, rest.frame)]]}
+           "rest_mesh": [[round(float(x), 3) for x in p[:2]] for p in meshes[rest]]}
     (folder / POSES_NAME).write_text(json.dumps(doc) + "\n", encoding="utf-8")
     return f"plate: {{video: {VIDEO_NAME}, poses: {POSES_NAME}, mask: {MASK_NAME}}}\n"
