@@ -34,7 +34,7 @@ from typing import List, Optional, Tuple
 import numpy as np
 
 from ..errors import InputError, PathLike
-from .plate import PlateCompositor, pingpong, plate_colour
+from .plate import PlateCompositor, colour_lut, pingpong, plate_colour
 
 __all__ = ["dub", "DubReport", "DubWarning", "cache_root", "lost_frames_text"]
 
@@ -241,7 +241,8 @@ def colour_table(bank, video: Path, track, poses: np.ndarray, bank_mesh: np.ndar
     found = np.nonzero(track.found)[0]
     frames = sorted({int(found[int(k)]) for k in np.linspace(0, found.size - 1, min(COLOUR_SAMPLES, found.size))})
     got = grab_frames(video, frames)
-    return plate_colour(bank.images[bank.rest], bank_mesh, mask, [got[f] for f in frames], [poses[f] for f in frames])
+    return colour_lut(plate_colour(bank.images[bank.rest], bank_mesh, mask, [got[f] for f in frames],
+                                   [poses[f] for f in frames]))
 
 
 # --------------------------------------------------------------------------- plate frames
