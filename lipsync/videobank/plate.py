@@ -10,8 +10,8 @@ Chosen here (:func:`choose_stretch`), from the frames :func:`lipsync.videobank.m
 has already tracked and registered: the window of :data:`PLATE_SECONDS` (or the whole
 video, if shorter) in which the **lower face moves least** (the jaw's drop and the lips'
 opening, frame to frame, in eye distances: speech there would show around the mask's
-edge) and the **head stays near one pose** (the stabilisation residual), with the face
-found in every frame. The frames are cut at the bank's framing by **one** transform, the
+edge), the **head moves least** (the still points' centre, frame to frame) and turns least (the
+stabilisation residual), with the face found in every frame. The frames are cut at the bank's framing by **one** transform, the
 stretch's mean pose (stabilised: the crop does not jitter with the tracker, while the head
 keeps its own motion inside it), and each frame's own pose is stored as the 2x3 matrix
 taking bank pixels to that plate frame's pixels.
@@ -53,6 +53,9 @@ PLATE_CRF = 12
 #: against a window per unit of lower-face motion: 0.01 eye distances of head turn weigh as
 #: much as the jaw moving 0.01 eye distances a frame.
 RESIDUAL_WEIGHT = 1.0
+#: The head's own steps (the eyes' centre, eye distances per frame) count this much: a step
+#: of the whole head is seen all over the picture, a jaw's only around the mask's edge.
+HEAD_WEIGHT = 2.0
 
 
 @dataclass(frozen=True)
@@ -89,6 +92,21 @@ def best_window(cost: np.ndarray, length: int) -> Tuple[int, int]:
     return i, i + length
 
 
+def head_motion(points: np.ndarray) -> np.ndarray:
+    """Per frame, how far the still points' centre (eye corners, nose bridge: not the lids,
+    so a blink is not a move) went since the frame before, eye distances (0 for frame 0, NaN
+    without a face): a head that nods or turns to look at a keyboard is not idle, however
+    still its jaw."""
+    from ..face import topology as T
+    from ..face.measure import eye_distance
+
+    p = np.asarray(points, np.float64)
+    c = p[:, list(T.STILL_POINTS), :2].mean(axis=1)
+    out = np.zeros(len(p))
+    out[1:] = np.hypot(*np.diff(c, axis=0).T) / eye_distance(p)[1:]
+    return out
+
+
 def lower_face_motion(points: np.ndarray) -> np.ndarray:
     """Per frame, how far the jaw and lips moved since the frame before, eye distances (NaN
     where either frame lacks a face; frame 0 is 0)."""
@@ -115,7 +133,7 @@ def choose_stretch(footage, fps_of=None) -> Stretch:
     for v, (tr, reg) in enumerate(zip(footage.tracks, footage.regs)):
         n = len(tr)
         length = min(n, int(round(PLATE_SECONDS * tr.fps)))
-        cost = lower_face_motion(tr.points) + RESIDUAL_WEIGHT * reg.residual
+        cost = lower_face_motion(tr.points) + HEAD_WEIGHT * head_motion(tr.points) + RESIDUAL_WEIGHT * reg.residual
         cost[~tr.found] = np.nan
         # the first frame of a run has no motion before it: its cost is its residual only
         a, b = best_window(cost, length)
