@@ -40,7 +40,7 @@ _EXPORTS = {
     "morph": "render",
     "Animator": "animator",
     "LiveAnimator": "live",
-    "dub": "composite.dub",
+    "dub": "dubbing",
 }
 _SUBMODULES = {"warp", "bank", "normalise", "flows", "store", "render", "timeline", "phonemes",
                "sequencer", "timing", "coarticulation", "encode", "animator", "registry", "errors", "cli", "preview", "clip", "live"}

@@ -14,7 +14,7 @@ import cv2
 import numpy as np
 import pytest
 
-from lipsync.composite.dub import DubWarning, dub, lost_frames_text
+from lipsync.dubbing import DubWarning, dub, lost_frames_text
 from lipsync.composite.plate import PlateCompositor, compose, pingpong, pose_inverse
 from lipsync.face import measure as M
 from lipsync.face import topology as T

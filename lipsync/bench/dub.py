@@ -122,7 +122,7 @@ def kept(out_frames, src_frames, rows: int, box: tuple) -> Dict[str, float]:
 def _quality(ctx: Context, bank_path: Path, rows: List[dict]) -> None:
     from ..animator import Animator
     from ..bank import Bank
-    from ..composite.dub import dub
+    from ..dubbing import dub
     from ..face.landmarks import FaceMesh
     from ..face.video import read_video
 
@@ -184,7 +184,7 @@ def cost_per_frame(bank_path: Path, video: Path, speech: Path, text: str, repeat
     and the stages of each, for ``speech`` rendered with ``bank_path`` and dubbed onto ``video``."""
     from ..animator import Animator
     from ..bank import Bank
-    from ..composite.dub import bank_face, colour_table, plate_poses, video_track
+    from ..dubbing import bank_face, colour_table, plate_poses, video_track
     from ..composite.plate import PlateCompositor
     from ..face.video import probe_video, read_video
     from ..speech.align import align

@@ -48,7 +48,7 @@ def add_parser(sub) -> None:
 def run(args: argparse.Namespace) -> int:
     import os
 
-    from ..composite.dub import dub
+    from ..dubbing import dub
     from ..encode.mp4 import check_preset
 
     check_preset(args.preset)  # before loading anything

@@ -271,7 +271,7 @@ def plate_colour(image: np.ndarray, mesh: np.ndarray, mask: np.ndarray, frames, 
     >>> plate_colour(img, mesh, mask, [plate], [np.array([[1.0, 0, 0], [0, 1.0, 0]])]).round(3).tolist()
     [1.2, 1.2, 1.2]
     """
-    from ..videobank.colour import PLAUSIBLE_GAIN
+    from .face import GAIN_RANGE
 
     h, w = image.shape[:2]
     top_of_lip = float(np.asarray(mesh, np.float64)[0, 1])  # mesh point 0: the upper lip's top, midline
@@ -282,7 +282,7 @@ def plate_colour(image: np.ndarray, mesh: np.ndarray, mask: np.ndarray, frames, 
     gains = [cv2.warpAffine(np.ascontiguousarray(f), np.asarray(p, np.float64), (w, h),
                             flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP)[where].astype(np.float64).mean(axis=0)
              / np.maximum(ours, 1.0) for f, p in zip(frames, poses)]
-    return np.clip(np.median(gains, axis=0), *PLAUSIBLE_GAIN)
+    return np.clip(np.median(gains, axis=0), *GAIN_RANGE)
 
 
 class Plate:
