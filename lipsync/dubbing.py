@@ -232,17 +232,19 @@ def plate_poses(bank_mesh: np.ndarray, track) -> np.ndarray:
     return out
 
 
-def colour_table(bank, video: Path, track, poses: np.ndarray, bank_mesh: np.ndarray, mask: np.ndarray) -> np.ndarray:
-    """The colour table taking the bank's rest picture to the video's colour
-    (:func:`~lipsync.composite.plate.plate_colour` over frames spread through the video)."""
+def colour_table(bank, video: Path, track, poses: np.ndarray, bank_mesh: np.ndarray, mask: np.ndarray):
+    """The colour table (or None: the colours agree) taking the bank's rest picture to the
+    video's colour (:func:`~lipsync.composite.plate.plate_colour` over frames spread through
+    the video)."""
     from .videobank.cut import grab_frames
     from .composite.plate import COLOUR_SAMPLES
 
     found = np.nonzero(track.found)[0]
     frames = sorted({int(found[int(k)]) for k in np.linspace(0, found.size - 1, min(COLOUR_SAMPLES, found.size))})
     got = grab_frames(video, frames)
-    return colour_lut(plate_colour(bank.images[bank.rest], bank_mesh, mask, [got[f] for f in frames],
-                                   [poses[f] for f in frames]))
+    gains = plate_colour(bank.images[bank.rest], bank_mesh, mask, [got[f] for f in frames], [poses[f] for f in frames])
+    # a bank made from this video has its colour already: no table to apply every frame
+    return None if np.abs(gains - 1.0).max() * 255 < 0.5 else colour_lut(gains)
 
 
 # --------------------------------------------------------------------------- plate frames
@@ -308,7 +310,8 @@ class _PlateReader:
 # --------------------------------------------------------------------------- the pipeline
 
 def dub(video: PathLike, audio: PathLike, output: PathLike, *, text: Optional[str] = None, bank=None,
-        video_text: Optional[str] = None, map=None, timing=None, crf: int = 18, preset: Optional[str] = None, store=None,
+        video_text: Optional[str] = None, map=None, timing=None, crf: int = 18, preset: Optional[str] = None,
+        store=None,
         jobs: Optional[int] = None, quiet: bool = False, cache: Optional[PathLike] = None) -> DubReport:
     """Re-voice ``video`` with the speech in ``audio`` (``lipsync dub``).
 

@@ -68,7 +68,7 @@ def main(out: str) -> int:
             code = lipsync(args)
             if code:
                 return code
-        rows = [list(read_video(grid.video(B))), list(read_video(tmp / "render.mp4")), list(read_video(tmp / "dub.mp4"))]
+        rows = [list(read_video(v)) for v in (grid.video(B), tmp / "render.mp4", tmp / "dub.mp4")]
     words = grid.alignment_of(B).words
     start = int(words[0].start * 25)
     picks = [start + EVERY * k for k in range(COUNT) if start + EVERY * k < min(len(r) for r in rows)]

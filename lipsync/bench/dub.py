@@ -219,7 +219,7 @@ def cost_per_frame(bank_path: Path, video: Path, speech: Path, text: str, repeat
     out["plate_copy_ms"] = per_frame(lambda i: np.copyto(buf, plate.frames[plate.index(i, live.fps)]))
     still.frame(0, out=mouth)
     out["plate_composite_ms"] = per_frame(
-        lambda i: plate.compositor.apply(mouth, buf, plate.poses[plate.index(i, live.fps)]))
+        lambda i: plate.compositor.apply_prepared(mouth, buf, plate._prepared[plate.index(i, live.fps)]))
 
     # dub: the lower face onto the video's own frames (decoded beforehand; decoding timed apart)
     info = probe_video(video)

@@ -34,9 +34,11 @@ def add_parser(sub) -> None:
     p.add_argument("--map", default=DEFAULT_MAP, metavar="NAME_OR_FILE",
                    help=f"phoneme-to-viseme map (default: {DEFAULT_MAP})")
     p.add_argument("--timing", choices=timing_names(), default=None, metavar="NAME", help=TIMING_HELP)
-    p.add_argument("--crf", type=int, default=DEFAULT_CRF, help=f"H.264 quality, lower is better (default: {DEFAULT_CRF})")
+    p.add_argument("--crf", type=int, default=DEFAULT_CRF,
+                   help=f"H.264 quality, lower is better (default: {DEFAULT_CRF})")
     p.add_argument("--preset", default=DEFAULT_PRESET,
-                   help=f"x264 speed preset: x264's (ultrafast ... veryslow) or talking-head (default: {DEFAULT_PRESET})")
+                   help=f"x264 speed preset: x264's (ultrafast ... veryslow) or talking-head "
+                        f"(default: {DEFAULT_PRESET})")
     p.add_argument("--cache", default=None, metavar="DIR",
                    help="cache of face tracks and banks made from videos (default: ~/.cache/lipsync/dub)")
     add_store_option(p)

@@ -10,9 +10,10 @@ Chosen here (:func:`choose_stretch`), from the frames :func:`lipsync.videobank.m
 has already tracked and registered: the window of :data:`PLATE_SECONDS` (or the whole
 video, if shorter) in which the **lower face moves least** (the jaw's drop and the lips'
 opening, frame to frame, in eye distances: speech there would show around the mask's
-edge), the **head moves least** (the still points' centre, frame to frame) and turns least (the
-stabilisation residual), with the face found in every frame. The frames are cut at the bank's framing by **one** transform, the
-stretch's mean pose (stabilised: the crop does not jitter with the tracker, while the head
+edge), the **head moves least** (the still points' centre, frame to frame, and how far it
+wanders over the window) and turns least (the stabilisation residual), with the face found
+in every frame; shorter windows (down to 1.5 s) when no 4 s one keeps the head still.
+The frames are cut at the bank's framing by **one** transform, the stretch's mean pose (stabilised: the crop does not jitter with the tracker, while the head
 keeps its own motion inside it), and each frame's own pose is stored as the 2x3 matrix
 taking bank pixels to that plate frame's pixels.
 
@@ -30,6 +31,9 @@ Examples
 >>> motion = np.array([5, 5, 0, 0, 0, 0, 5, 5], float)
 >>> best_window(motion, 3)
 (2, 5)
+>>> head = np.array([[0, 0], [0, 0], [0, 0], [0, 0], [9, 0], [9, 0], [9, 0], [9, 0]], float)
+>>> best_window(motion, 3, head)       # the head jumps at frame 4: the window before it
+(1, 4)
 """
 
 from __future__ import annotations
@@ -46,6 +50,13 @@ VIDEO_NAME, POSES_NAME, MASK_NAME = "plate.mp4", "plate.json", "plate-mask.png"
 #: Length of the idle stretch: long enough to hold a blink or two (people blink every
 #: 2-10 s) and a few glances; played back and forth, it never repeats within 2x this.
 PLATE_SECONDS = 4.0
+#: Lengths tried, longest first, until one is idle (:data:`IDLE_SPREAD`).
+PLATE_LENGTHS = (PLATE_SECONDS, 3.0, 2.0, 1.5)
+#: A stretch whose head wanders more than this (standard deviation of the still points'
+#: centre, eye distances) is not idle: the 2-D pose cannot follow a head that turns, and
+#: the pasted lower face then shows it (a webcam speaker looking down at a keyboard,
+#: tools/other_face.py: 0.3-0.5 over 4 s; GRID's still speaker under 0.03).
+IDLE_SPREAD = 0.05
 #: x264 quality of plate.mp4: near-transparent (the plate is shown as it is in every frame,
 #: so its own compression would add to the render's).
 PLATE_CRF = 12
@@ -67,13 +78,16 @@ class Stretch:
     stop: int
     motion: float      # mean lower-face motion, eye distances per frame
     residual: float    # median pose residual, eye distances
+    spread: float = 0.0  # how far the head wanders in it (SD of the still points' centre), eye distances
 
     def __len__(self) -> int:
         return self.stop - self.start
 
 
-def best_window(cost: np.ndarray, length: int) -> Tuple[int, int]:
-    """``(start, stop)`` of the ``length``-frame window of least summed ``cost`` (NaN: not allowed).
+def best_window(cost: np.ndarray, length: int, spread=None) -> Tuple[int, int]:
+    """``(start, stop)`` of the ``length``-frame window of least mean ``cost`` (NaN: not
+    allowed) plus, when given, ``spread`` ``(N, 2)``'s standard deviation over the window
+    (its points' distance from their mean: how far the head wanders in it).
 
     Returns ``(0, 0)`` when no window is free of NaN.
     """
@@ -84,10 +98,17 @@ def best_window(cost: np.ndarray, length: int) -> Tuple[int, int]:
         return 0, 0
     s = np.concatenate([[0.0], np.cumsum(c)])
     b = np.concatenate([[0], np.cumsum(bad)])
-    sums = s[length:] - s[:-length]
-    sums[(b[length:] - b[:-length]) > 0] = np.inf
-    i = int(np.argmin(sums))
-    if not np.isfinite(sums[i]):
+    score = (s[length:] - s[:-length]) / length
+    if spread is not None:
+        x = np.where(bad[:, None], 0.0, np.asarray(spread, np.float64))
+        s1 = np.concatenate([np.zeros((1, 2)), np.cumsum(x, axis=0)])
+        s2 = np.concatenate([np.zeros((1, 2)), np.cumsum(x * x, axis=0)])
+        m1 = (s1[length:] - s1[:-length]) / length
+        m2 = (s2[length:] - s2[:-length]) / length
+        score = score + np.sqrt(np.maximum((m2 - m1 * m1).sum(axis=1), 0.0))
+    score[(b[length:] - b[:-length]) > 0] = np.inf
+    i = int(np.argmin(score))
+    if not np.isfinite(score[i]):
         return 0, 0
     return i, i + length
 
@@ -127,26 +148,34 @@ def _jaw_drop(points: np.ndarray) -> np.ndarray:
     return np.hypot(*(p[:, 152, :2] - p[:, 4, :2]).T) / eye_distance(p)
 
 
-def choose_stretch(footage, fps_of=None) -> Stretch:
+def choose_stretch(footage) -> Stretch:
     """The best idle stretch of the footage (see the module docstring)."""
+    from ..face import topology as T
+    from ..face.measure import eye_distance
+
     best = None
     for v, (tr, reg) in enumerate(zip(footage.tracks, footage.regs)):
         n = len(tr)
-        length = min(n, int(round(PLATE_SECONDS * tr.fps)))
         cost = lower_face_motion(tr.points) + HEAD_WEIGHT * head_motion(tr.points) + RESIDUAL_WEIGHT * reg.residual
         cost[~tr.found] = np.nan
-        # the first frame of a run has no motion before it: its cost is its residual only
-        a, b = best_window(cost, length)
-        while b == 0 and length > 2:  # the face lost somewhere in every window: shorter
-            length = length * 3 // 4
-            a, b = best_window(cost, length)
+        # where the head is (the still points' centre, eye distances): a window in which it
+        # wanders far is not idle, even if it moves slowly
+        d = float(np.nanmedian(eye_distance(tr.points)))
+        where = tr.points[:, list(T.STILL_POINTS), :2].mean(axis=1) / d * HEAD_WEIGHT
+        for seconds in PLATE_LENGTHS:
+            length = min(n, int(round(seconds * tr.fps)))
+            a, b = best_window(cost, length, where)
+            if b == 0:
+                continue  # the face lost somewhere in every window: shorter
+            spread = float(np.sqrt(np.nansum(np.nanvar(where[a:b] / HEAD_WEIGHT, axis=0))))
+            if spread <= IDLE_SPREAD or seconds == PLATE_LENGTHS[-1] or length == n:
+                break
         if b == 0:
             continue
-        score = float(np.mean(cost[a:b]))
         s = Stretch(video=v, start=a, stop=b, motion=float(np.nanmean(lower_face_motion(tr.points)[a:b])),
-                    residual=float(np.nanmedian(reg.residual[a:b])))
-        # longer first (more life), then stiller
-        key = (-len(s), score)
+                    residual=float(np.nanmedian(reg.residual[a:b])), spread=spread)
+        # idle first, then longer (more life), then stiller
+        key = (spread > IDLE_SPREAD, -len(s), float(np.mean(cost[a:b])) + spread)
         if best is None or key < best[0]:
             best = (key, s)
     if best is None:
@@ -194,7 +223,8 @@ def write_plate(folder: Path, footage, framing, meshes, rest: str) -> str:
     write_png(folder / MASK_NAME, cv2.cvtColor(np.round(mask * 255).astype(np.uint8), cv2.COLOR_GRAY2RGB))
     doc = {"fps": tr.fps, "frames": len(s), "size": [w, h],
            "source": {"video": src.name, "start_frame": s.start, "stop_frame": s.stop,
-                      "lower_face_motion": round(s.motion, 5), "pose_residual": round(s.residual, 5)},
+                      "lower_face_motion": round(s.motion, 5), "pose_residual": round(s.residual, 5),
+                      "head_spread": round(s.spread, 5)},
            "poses": [[round(float(x), 5) for x in p.ravel()] for p in poses],
            # the rest picture's face mesh (bank pixels): the plate's colour is matched on its still skin
            "rest_mesh": [[round(float(x), 3) for x in p[:2]] for p in meshes[rest]]}
