@@ -13,9 +13,10 @@ opening, frame to frame, in eye distances: speech there would show around the ma
 edge), the **head moves least** (the still points' centre, frame to frame, and how far it
 wanders over the window) and turns least (the stabilisation residual), with the face found
 in every frame; shorter windows (down to 1.5 s) when no 4 s one keeps the head still.
-The frames are cut at the bank's framing by **one** transform, the stretch's mean pose (stabilised: the crop does not jitter with the tracker, while the head
-keeps its own motion inside it), and each frame's own pose is stored as the 2x3 matrix
-taking bank pixels to that plate frame's pixels.
+The frames are cut at the bank's framing by **one** transform, the stretch's mean pose
+(stabilised: the crop does not jitter with the tracker, while the head keeps its own
+motion inside it), and each frame's own pose is stored as the 2x3 matrix taking bank
+pixels to that plate frame's pixels.
 
 Written into the bank (bank.yaml ``plate: {video: plate.mp4, poses: plate.json, mask:
 plate-mask.png}``):
