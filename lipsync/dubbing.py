@@ -440,6 +440,8 @@ def dub(video: PathLike, audio: PathLike, output: PathLike, *, text: Optional[st
     scratch = threading.local()
     output.parent.mkdir(parents=True, exist_ok=True)
     reader = _PlateReader(video, info, keep=n > nv, scratch_dir=output.parent)
+    shape = (info.size[1], info.size[0], 3)
+    geometry = [compositor.geometry(p, shape) if found else None for p, found in zip(poses, track.found)]
 
     def render_into(i: int, buf: np.ndarray) -> None:
         j = plate_of[i]
@@ -449,7 +451,7 @@ def dub(video: PathLike, audio: PathLike, output: PathLike, *, text: Optional[st
         mouth = getattr(scratch, "frame", None)
         if mouth is None:
             mouth = scratch.frame = np.empty(bank_shape, np.uint8)
-        compositor.apply(anim.frame(i, out=mouth)[..., :3], buf, poses[j])
+        compositor.apply(anim.frame(i, out=mouth)[..., :3], buf, poses[j], geometry[j])
 
     w, h = info.size
     encoder_threads = 1 if (os.cpu_count() or 1) <= SINGLE_ENCODER_THREAD_CORES else None

@@ -234,17 +234,18 @@ def cost_per_frame(bank_path: Path, video: Path, speech: Path, text: str, repeat
     comp = PlateCompositor(mask, lut=colour_table(bank, video, track, poses, bank_mesh, mask))
     big = np.empty_like(frames[0])
     nv = len(frames)
+    geometry = [comp.geometry(p, big.shape) for p in poses]
 
     def dub_frame(i):
         j = i % nv
         np.copyto(big, frames[j])
         s = specs[i]
         still.renderer.render(s.from_viseme, s.to_viseme, s.alpha, out=mouth)
-        comp.apply(mouth, big, poses[j])
+        comp.apply(mouth, big, poses[j], geometry[j])
 
     out["dub_ms"] = per_frame(dub_frame)
     out["dub_copy_ms"] = per_frame(lambda i: np.copyto(big, frames[i % nv]))
-    out["dub_composite_ms"] = per_frame(lambda i: comp.apply(mouth, big, poses[i % nv]))
+    out["dub_composite_ms"] = per_frame(lambda i: comp.apply(mouth, big, poses[i % nv], geometry[i % nv]))
     out["bank"] = "x".join(map(str, bank.shape[::-1]))
     out["video"] = "x".join(map(str, info.size))
     return out

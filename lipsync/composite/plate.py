@@ -213,7 +213,15 @@ class PlateCompositor:
         return compose(np.array([[1.0, 0.0, -bx0], [0.0, 1.0, -by0]]),
                        compose(pose_inverse(pose), np.array([[1.0, 0.0, r[0]], [0.0, 1.0, r[1]]])))
 
-    def apply(self, mouth: np.ndarray, plate: np.ndarray, pose: np.ndarray) -> np.ndarray:
+    def geometry(self, pose: np.ndarray, plate_shape) -> Optional[tuple]:
+        """``(roi, inverse)``: the pose's rectangle on the plate and the 2x3 map from it back
+        to the mask's box, for :meth:`apply` (a dub works them out for every video frame
+        before the first is composited: matrix arithmetic in Python costs as much per frame
+        as a tenth of the pixel work at 360x288)."""
+        r = self.roi(pose, plate_shape)
+        return None if r is None else (r, self._inverse(pose, r))
+
+    def apply(self, mouth: np.ndarray, plate: np.ndarray, pose: np.ndarray, geometry=None) -> np.ndarray:
         """Write the lower face of ``mouth`` (a bank frame, RGB) onto ``plate`` in place and
         return ``plate``.
 
@@ -225,14 +233,15 @@ class PlateCompositor:
             ``(Hp, Wp, 3)`` writable plate frame; only :meth:`roi` is written.
         pose : numpy.ndarray
             2x3 matrix taking bank pixels to plate pixels.
+        geometry : tuple, optional
+            :meth:`geometry` of ``pose`` on this plate's shape, if made beforehand.
         """
-        r = self.roi(pose, plate.shape)
-        if r is None:
+        g = self.geometry(pose, plate.shape) if geometry is None else geometry
+        if g is None:
             return plate
-        rx0, ry0, rx1, ry1 = r
+        (rx0, ry0, rx1, ry1), inv = g
         h, w = ry1 - ry0, rx1 - rx0
         bx0, by0, bx1, by1 = self.box
-        inv = self._inverse(pose, r)
         img, m, m1 = self._scratch(h, w, plate.shape[2])
         img, m, m1 = img[:h, :w], m[:h, :w], m1[:h, :w]
         flags = cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP
