@@ -213,10 +213,11 @@ def test_photos_of_a_face_get_lines_from_the_face(tmp_path, grid_frames, capsys)
     from lipsync.face.lines import FACE_TEMPLATE, FACE_WARP
 
     _save(tmp_path, grid_frames)
-    assert main(["init", str(tmp_path)]) == 0
+    assert main(["init", str(tmp_path), "--keep-photos"]) == 0
     out = capsys.readouterr().out
     for v in grid_frames:
         assert f"{v}.png: lines from face" in out
+    assert "one face" not in out and not (tmp_path / "one-face").exists()
     bank = Bank.load(tmp_path)
     assert set(bank.feature_names) >= {f.name for f in FACE_TEMPLATE}
     assert bank.warp == FACE_WARP
@@ -234,6 +235,43 @@ def test_photos_of_a_face_get_lines_from_the_face(tmp_path, grid_frames, capsys)
                                    - bank.features[v]["lip_inner_lower_l"].points[-1])
     assert gap("D") > 3 * gap("X")
     assert main(["check", str(tmp_path)]) == 0
+
+
+def test_photos_of_one_face_become_one_face_by_default(tmp_path, grid_frames, capsys):
+    from lipsync.composite.face import mask_from_lines
+    from lipsync.face.landmarks import FaceMesh
+
+    _save(tmp_path, grid_frames)
+    before = {p.name: p.read_bytes() for p in tmp_path.iterdir()}
+    assert main(["init", str(tmp_path)]) == 0
+    assert "one face: the pictures are X.png outside the lower face" in capsys.readouterr().out
+    assert {p.name: p.read_bytes() for p in tmp_path.iterdir() if p.is_file() and p.name != "bank.yaml"} == before
+    bank = Bank.load(tmp_path)
+    assert "one-face/D.png" in (tmp_path / "bank.yaml").read_text()
+    png = {v: cv2.cvtColor(cv2.imread(str(tmp_path / "one-face" / f"{v}.png")), cv2.COLOR_BGR2RGB) for v in grid_frames}
+    # the rest photo is the plate as it was; every other picture is it outside the lower-face mask
+    assert np.array_equal(png["X"], grid_frames["X"])
+    outside = mask_from_lines([bank.features[v] for v in bank.names], bank.shape) == 0
+    assert 0.6 < outside.mean() < 0.98
+    for v in "FDB":
+        assert np.array_equal(png[v][outside], grid_frames["X"][outside]), v
+        # ... where the photo itself differed (another moment: the head and light moved)
+        assert np.abs(grid_frames[v].astype(int) - grid_frames["X"])[outside].mean() > 0.5, v
+    # inside, each photo's own mouth: the mesh finds D's open lips and X's closed ones on the
+    # pictures, where bank.yaml's lines put them
+    mesh = FaceMesh()
+    for v in "XD":
+        pts = mesh.find(png[v])
+        lip = bank.features[v]["lip_inner_lower_l"].points
+        assert np.linalg.norm(lip[-1] - pts[14, :2]) < 1.5, v
+    gap = lambda v: np.linalg.norm(bank.features[v]["lip_inner_upper_l"].points[-1]  # noqa: E731
+                                   - bank.features[v]["lip_inner_lower_l"].points[-1])
+    assert gap("D") > 3 * gap("X")
+    assert main(["check", str(tmp_path)]) == 0
+    # run again with --keep-photos --force: the photos, no one-face folder left behind
+    assert main(["init", str(tmp_path), "--keep-photos", "--force"]) == 0
+    assert Bank.load(tmp_path).images["D"].shape[:2] == grid_frames["D"].shape[:2]
+    assert "one-face/" not in (tmp_path / "bank.yaml").read_text()
 
 
 def test_a_symmetric_face_gets_a_symmetric_bank(tmp_path, grid_frames):

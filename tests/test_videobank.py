@@ -257,6 +257,42 @@ def test_one_face_every_picture_is_the_plate_outside_its_lower_face_mask(made, m
     assert eyes_plate > 0.9 * eyes_video, (eyes_plate, eyes_video)
 
 
+def test_pictures_span_the_speakers_range(made, mesh):
+    """The open shapes' pictures open as wide as the wider half of what the videos show for
+    them (not their median instance), closures stay closed: the face mesh on the written
+    PNGs against every candidate frame's opening, the candidates found from GRID's own word
+    alignment (not lipsync's aligner, which chose the pictures)."""
+    from lipsync.face.track import track_video
+    from lipsync.phonemes import load_map
+    from lipsync.readers.grid import read_words
+    from lipsync.speech.phonetise import words_to_phones
+    from lipsync.videobank.select import candidates
+    from lipsync.videobank.speech import viseme_spans
+
+    result, _ = made
+    bank = Bank.load(result.path)
+    pmap = load_map("english-to-rhubarb")
+    seen = {}
+    for clip in BANK:
+        p = GRID / f"{clip}.align"
+        spans = viseme_spans(words_to_phones(read_words(str(p), p.read_bytes())), pmap)
+        tr = track_video(GRID / f"{clip}.mpg")
+        opening = M.lip_opening(tr.points)
+        for c in candidates(spans, video=0, fps=tr.fps, found=tr.found, rest=pmap.silence):
+            seen.setdefault(c.viseme, []).append(float(opening[c.frame]))
+    png = {v: float(M.lip_opening(mesh.find(bank.images[v][..., :3]))) for v in bank.names}
+    rank = {v: float(np.mean(np.array(seen[v]) <= png[v])) for v in seen}
+    # open shapes: on average in the upper part of their instances' openings (each viseme has
+    # only 3-14 instances in two sentences: one rank alone is coarse); median pictures were
+    # at about one half
+    assert np.mean([rank[v] for v in "BCDH"]) >= 0.65, rank
+    # closed lips for P B M; at rest relaxed, not the parted-lips tail of the pauses
+    assert rank["A"] <= 0.5 and rank["X"] <= 0.9, rank
+    # and the widest picture reaches the wide end of what the speaker shows (all open shapes)
+    wide = np.concatenate([seen[v] for v in "CDH"])
+    assert max(png[v] for v in "CDH") >= np.percentile(wide, 80), (png, np.percentile(wide, [50, 80, 90]))
+
+
 def test_chosen_frames_show_their_shapes(made, mesh):
     result, _ = made
     bank = Bank.load(result.path)

@@ -28,9 +28,12 @@ SOURCE = """# GRID speaker s1: a subject made from real video
 
 Nine pictures of one speaker, one per mouth shape of `english-to-rhubarb`, chosen from ten
 sentences of real video by `lipsync init --video` (`tools/make_grid_bank.py`; the frames
-chosen, their times and scores are in `init-report.json`). Each picture is a video frame
-rotated, scaled and shifted onto one head pose and cropped around the head, with its colour
-gains matched to the others; nothing else was changed.
+chosen, their times and scores are in `init-report.json`). The rest picture (X, the *plate*,
+`face_plate` in the report) is a video frame rotated, scaled and shifted onto one head pose
+and cropped around the head. Every other picture is that plate outside the lower face; inside
+it, the mouth, jaw and chin of its own chosen frame, moved onto the plate's pose, colour
+matched on the skin around it and blended in with a feathered mask (one face: see
+docs/make-a-subject.md). Nothing else was changed.
 
 The sentences: {clips}.
 

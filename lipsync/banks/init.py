@@ -43,6 +43,7 @@ Where the lines come from (``lines``):
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Dict, List, Optional, Sequence, Tuple
@@ -100,6 +101,9 @@ class InitResult:
     #: viseme -> where its lines came from: "face", "template <name>", or "face of <image>
     #: (no face found in <image>)" for an image that borrowed another's face.
     lines: Dict[str, str] = field(default_factory=dict)
+    #: Whether the pictures are one face (written to :data:`ONE_FACE_DIR`; ``keep_photos``
+    #: off and faces found).
+    one_face: bool = False
 
 
 def _images(folder: Path, exclude: Sequence[str] = ()) -> List[Path]:
@@ -166,7 +170,7 @@ def parse_face_box(text: str) -> Tuple[float, float, float, float]:
 def init_bank(folder, *, template: str = "toon", names: Optional[Dict[str, str]] = None,
               face_box: Optional[Tuple[float, float, float, float]] = None, layout: str = "auto",
               rest: Optional[str] = None, force: bool = False, lines: str = "auto",
-              composite: Optional[dict] = None) -> InitResult:
+              composite: Optional[dict] = None, keep_photos: bool = False) -> InitResult:
     """Write ``folder/bank.yaml`` for the images in ``folder``; it passes ``lipsync check``.
 
     Parameters
@@ -190,6 +194,12 @@ def init_bank(folder, *, template: str = "toon", names: Optional[Dict[str, str]]
     composite : dict, optional
         ``{"image": NAME, "at": [x, y], "scale": s}``: the body image (a file in ``folder``,
         not a viseme) the mouth is drawn on and where, written as the bank's ``composite:``.
+    keep_photos : bool
+        With lines from the faces, the bank's pictures are by default *one face*: the rest
+        image (the plate) everywhere except the lower face, where each image's mouth, jaw
+        and chin, moved onto the plate's pose, are pasted in (:data:`ONE_FACE_DIR`, see
+        :func:`lipsync.composite.face.onto_plate`); ``keep_photos`` uses the images as they
+        are.
 
     Returns
     -------
@@ -262,19 +272,25 @@ def init_bank(folder, *, template: str = "toon", names: Optional[Dict[str, str]]
     if layout == "auto":
         layout = "mouth" if face_box is None and max(h, w) <= SPRITE_MAX_SIDE else "face"
     if lines == "face" or (lines == "auto" and layout == "face"):
-        faced = _face_lines(folder, named, visemes, rest, images, forced=lines == "face")
+        faced = _face_lines(folder, named, visemes, rest, images, forced=lines == "face", one_face=not keep_photos)
         if faced is not None:
-            doc, sources, symmetric = faced
+            doc, sources, symmetric, pasted = faced
             if composite:
                 doc = _with_composite(doc, composite)
             header = [f"# Written by lipsync init: lines placed from each image's face "
                       f"({'symmetric' if symmetric else 'not symmetric enough for symmetry: true'}); "
                       f"adjust them with: lipsync edit {folder}"]
+            if pasted:
+                header.append(f"# One face: the pictures in {ONE_FACE_DIR}/ are {named[rest].name} outside the lower "
+                              f"face (lipsync init --keep-photos uses the photos as they are)")
             text = dump_bank(doc, header=header)
+            cache.update({f"{ONE_FACE_DIR}/{n}": img for n, img in pasted.items()})
             Bank.from_text(text, folder, images=cache)
+            if pasted:
+                _write_one_face(folder, pasted)
             write_bank_text(yaml_path, text)
             return InitResult(yaml_path=yaml_path, visemes={v: named[v].name for v in visemes}, system=system,
-                              rest=rest, layout="face", size=(w, h), lines=sources)
+                              rest=rest, layout="face", size=(w, h), lines=sources, one_face=bool(pasted))
 
     if template in TEMPLATES:
         tdir = Path(TEMPLATES.get(template)())
@@ -364,6 +380,8 @@ class FacePlacement:
     features: Dict[str, Dict[str, Feature]]
     sources: Dict[str, str]
     symmetric: bool
+    #: Viseme → the face mesh found in its image (visemes without a face left out).
+    found: Dict[str, np.ndarray] = field(default_factory=dict)
 
 
 def place_face_lines(images: Dict[str, np.ndarray], rest: str, *, labels: Optional[Dict[str, str]] = None,
@@ -424,12 +442,13 @@ def place_face_lines(images: Dict[str, np.ndarray], rest: str, *, labels: Option
     symmetric = face_asymmetry(list(found.values())) < SYMMETRIC_BELOW
     axis = midline_axis(list(found.values())) if symmetric else None
     h, w = next(iter(images.values())).shape[:2]
-    return FacePlacement(face_features(points, (h, w), axis=axis), sources, symmetric)
+    return FacePlacement(face_features(points, (h, w), axis=axis), sources, symmetric, found)
 
 
 def _face_lines(folder: Path, named: Dict[str, Path], visemes: List[str], rest: str,
-                images: Dict[str, np.ndarray], *, forced: bool):
-    """The bank document with face lines, or None when no image has a face (and not forced)."""
+                images: Dict[str, np.ndarray], *, forced: bool, one_face: bool = False):
+    """The bank document with face lines and the one-face pictures (file name → image;
+    empty when the photos are kept), or None when no image has a face (and not forced)."""
     from ..face.lines import FACE_WARP
 
     placed = place_face_lines({v: images[named[v].name] for v in visemes}, rest,
@@ -439,9 +458,76 @@ def _face_lines(folder: Path, named: Dict[str, Path], visemes: List[str], rest: 
             raise InputError("no face found in any image (" + ", ".join(named[v].name for v in visemes)
                              + "); --lines template starts from the template's lines instead", path=folder)
         return None
+    features, files, pasted = placed.features, {v: named[v].name for v in visemes}, {}
+    if one_face and rest in placed.found and len(placed.found) > 1:
+        features, pictures = _one_face({v: images[named[v].name] for v in visemes}, rest, placed)
+        for v, img in pictures.items():
+            name = Path(named[v].name).with_suffix(".png").name
+            files[v] = f"{ONE_FACE_DIR}/{name}"
+            pasted[name] = img
     doc = {"name": folder.resolve().name, "rest": rest,
            "warp": {"a": FACE_WARP.a, "b": FACE_WARP.b, "p": FACE_WARP.p}, "symmetry": placed.symmetric,
-           "visemes": {v: {"image": named[v].name,
-                           "lines": {n: f.to_yaml_value() for n, f in placed.features[v].items()}}
+           "visemes": {v: {"image": files[v],
+                           "lines": {n: f.to_yaml_value() for n, f in features[v].items()}}
                        for v in visemes}}
-    return doc, placed.sources, placed.symmetric
+    return doc, placed.sources, placed.symmetric, pasted
+
+
+#: Where ``lipsync init`` writes the one-face pictures, inside the images' folder (bank.yaml
+#: names only files inside its folder; the photos themselves are never changed).
+ONE_FACE_DIR = "one-face"
+
+
+def _one_face(images: Dict[str, np.ndarray], rest: str, placed: FacePlacement):
+    """Every image with a face turned into the rest image (the plate) outside its lower
+    face: its mouth, jaw and chin moved onto the plate's pose (one similarity, by the points
+    around the mask's upper edge) and pasted in; the lines from the pasted faces. Images
+    without a face keep their picture and borrowed lines."""
+    import cv2
+
+    from ..composite.face import onto_plate, pose_onto
+    from ..face.lines import face_features, midline_axis
+
+    plate, plate_points = images[rest], placed.found[rest]
+    h, w = plate.shape[:2]
+    pictures, points = {rest: plate}, {rest: plate_points}
+    for v, p in placed.found.items():
+        if v == rest:
+            continue
+        m = pose_onto(p, plate_points)
+        warped = cv2.warpAffine(np.ascontiguousarray(images[v]), m, (w, h), flags=cv2.INTER_LINEAR,
+                                borderMode=cv2.BORDER_REPLICATE)
+        moved = np.asarray(p, np.float64)[:, :2] @ m[:, :2].T + m[:, 2]
+        got = onto_plate(plate, np.asarray(plate_points, np.float64)[:, :2], warped, moved)
+        pictures[v], points[v] = got.image, got.points
+    if len(points) < len(images):   # images without a face: the lines they borrowed
+        donor = points[rest]
+        points.update({v: donor for v in images if v not in points})
+    axis = midline_axis(list(points.values())) if placed.symmetric else None
+    features = face_features(points, (h, w), axis=axis)
+    return {v: features[v] for v in images}, pictures
+
+
+def _write_one_face(folder: Path, pictures: Dict[str, np.ndarray]) -> None:
+    """The pictures written into ``folder/ONE_FACE_DIR`` all at once: a hidden staging
+    folder renamed into place (what was there before is replaced)."""
+    import shutil
+    import tempfile
+
+    import cv2
+
+    from .._files import partial_name, remove_stale_partials
+
+    target = folder / ONE_FACE_DIR
+    remove_stale_partials(target)   # a killed run's staging folder
+    stage = Path(tempfile.mkdtemp(prefix=partial_name(target, "-"), dir=folder))
+    try:
+        for name, img in pictures.items():
+            code = cv2.COLOR_RGBA2BGRA if img.shape[-1] == 4 else cv2.COLOR_RGB2BGR
+            if not cv2.imwrite(str(stage / name), cv2.cvtColor(np.ascontiguousarray(img), code)):
+                raise InputError("could not write the one-face picture", path=target / name)
+        if target.exists():
+            shutil.rmtree(target)
+        os.replace(stage, target)
+    finally:
+        shutil.rmtree(stage, ignore_errors=True)

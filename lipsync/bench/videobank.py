@@ -124,7 +124,10 @@ def judge_clip(bank, clip: str, mesh=None, *, timing=None, methods=METHODS) -> D
         "still": lambda: [anim.renderer.nb.images[bank.rest]] * n,
     }
     renders = {m: makers[m]() for m in methods}
-    out = {"real": {"open": M.lip_opening(real_track.points[:n])}, "specs": anim.specs[:n]}
+    out = {"real": {"open": M.lip_opening(real_track.points[:n]),
+                    "sharp": mouth_sharpness(real[:n], real_track.points[:n]),
+                    "above_nose": grid.above_nose_changes(real[:n], real_track.points[:n])},
+           "specs": anim.specs[:n]}
     shape = real[0].shape[:2]
     for method, frames in renders.items():
         tr = track_frames(frames, fps=real_track.fps, mesh=mesh)
@@ -137,7 +140,29 @@ def judge_clip(bank, clip: str, mesh=None, *, timing=None, methods=METHODS) -> D
             box = mouth_box(real_track.points[i], shape)
             ps.append(psnr(warped, real[i], box))
             ss.append(ssim(warped, real[i], box))
-        out[method] = {"open": opening, "psnr": np.array(ps), "ssim": np.array(ss)}
+        out[method] = {"open": opening, "psnr": np.array(ps), "ssim": np.array(ss),
+                       "sharp": mouth_sharpness(frames, tr.points),
+                       "above_nose": grid.above_nose_changes(frames, _nose_rows(bank))}
+    return out
+
+
+def _nose_rows(bank) -> int:
+    """Rows of a face bank's pictures above its rest viseme's nose base (its lines)."""
+    f = bank.features[bank.rest]
+    return int(np.floor(min(f["nose_base_l"].points[:, 1].min(), f["nose_base_r"].points[:, 1].min())))
+
+
+def mouth_sharpness(frames, points) -> np.ndarray:
+    """Per frame: variance of the Laplacian of the luma in the mouth region
+    (:func:`lipsync.face.compare.mouth_box`, :func:`lipsync.videobank.select.sharpness`);
+    NaN without a face. Compare frames at one scale (a bank from video keeps the video's)."""
+    from ..face.compare import mouth_box
+    from ..videobank.select import sharpness
+
+    out = np.full(len(frames), np.nan)
+    for i, (f, p) in enumerate(zip(frames, points)):
+        if np.all(np.isfinite(p)):
+            out[i] = sharpness(f[..., :3], mouth_box(p, f.shape[:2]))
     return out
 
 
@@ -228,3 +253,100 @@ def videobank_figures(ctx: Context, rows: List[dict]) -> None:
                                                 "same sequencer, no rendering",
                  "lip_corr_mean": round(float(np.nanmean(ideal_corr)), 3),
                  "lip_corr_pooled": round(_corr(np.concatenate(pooled["ideal"]), real_all), 3)})
+
+
+def above_nose_spread(bank) -> float:
+    """Mean absolute grey difference above the nose between two of a face bank's pictures,
+    averaged over every pair (0: one face; a bank of whole frames from different moments
+    differs in hair, eyes, framing and colour)."""
+    import itertools
+
+    import cv2
+
+    rows = _nose_rows(bank)
+    grey = {v: cv2.cvtColor(np.ascontiguousarray(bank.images[v][:rows, :, :3]), cv2.COLOR_RGB2GRAY).astype(np.int16)
+            for v in bank.names}
+    return float(np.mean([np.abs(grey[a] - grey[b]).mean() for a, b in itertools.combinations(bank.names, 2)]))
+
+
+def _closure_frames(specs, closures) -> np.ndarray:
+    """Frames that show a closure's picture (the morph at most a fifth of the way off it)."""
+    return np.array([(s.from_viseme in closures and s.alpha <= 0.2) or (s.to_viseme in closures and s.alpha >= 0.8)
+                     for s in specs], bool)
+
+
+#: The banks the range figure compares: (label, VideoBankConfig options).
+RANGE_BANKS = (("whole frames, median shapes (before issue 28)", dict(one_face=False, span=False)),
+               ("one face, pictures spanning the range", dict(one_face=True, span=True)))
+
+
+@FIGURES.decorator("videobank_range")
+def range_figures(ctx: Context, rows: List[dict]) -> None:
+    """Issue 28's one face, range and sharpness, on GRID's held-out sentences: for a bank of
+    whole frames with median shapes and one of one face spanning the range (both from
+    :data:`~lipsync.bench.grid.BANK_CLIPS`), rendered from each sentence's sound and
+    transcript and tracked: the lip-opening r with the real speaker, the rendered opening's
+    standard deviation over the real one's (pooled over the frames), the widest opening
+    (99th percentile), the opening on frames showing a closure, the mouth region's
+    sharpness (variance of the Laplacian) against the real frames', the pops figure (99th
+    percentile of the mean grey change above the nose between consecutive frames), and the
+    bank pictures' mean difference above the nose."""
+    from ..bank import Bank
+    from ..face.landmarks import FaceMesh
+    from ..face.compare import mouth_box
+    from ..phonemes import load_map
+    from ..videobank import make_bank
+    from ..videobank.select import sharpness
+
+    names = [c for c in grid.BANK_CLIPS if grid.video(c).is_file()]
+    if len(names) < len(grid.BANK_CLIPS):
+        rows.append({"figure": "videobank_range", "case": f"skipped: GRID's bank clips are not in {grid.grid_dir()}"})
+        return
+    videos = [grid.video(c) for c in names]
+    texts = {v: grid.transcript(c) for v, c in zip(videos, names)}
+    closures = set(load_map("english-to-rhubarb").closures)
+    clips = grid.held_out()[:6] if ctx.quick else grid.held_out()
+    mesh = FaceMesh()
+    real_done = False
+    for label, options in RANGE_BANKS:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            made = make_bank(ctx.tmp / f"range-{options['one_face']}", videos, texts=texts, force=True, quiet=True,
+                             **options)
+        bank = Bank.load(made.path)
+        got = {k: [] for k in ("r", "open", "real", "sharp", "real_sharp", "pops", "real_pops", "closed", "real_closed")}
+        for clip in clips:
+            j = judge_clip(bank, clip, mesh, methods=("flow morph",))
+            ren, real = j["flow morph"], j["real"]
+            got["r"].append(_corr(ren["open"], real["open"]))
+            ok = np.isfinite(ren["open"]) & np.isfinite(real["open"])
+            got["open"].append(ren["open"][ok])
+            got["real"].append(real["open"][ok])
+            shut = _closure_frames(j["specs"], closures) & ok
+            got["closed"].append(ren["open"][shut])
+            got["real_closed"].append(real["open"][shut])
+            got["sharp"].append(ren["sharp"])
+            got["real_sharp"].append(real["sharp"])
+            got["pops"].append(ren["above_nose"])
+            got["real_pops"].append(real["above_nose"])
+        cat = {k: np.concatenate(v) for k, v in got.items() if k != "r"}
+        pictures = np.array([sharpness(bank.images[v][..., :3], mouth_box(mesh.find(bank.images[v][..., :3]), bank.shape))
+                             for v in bank.names])
+        if not real_done:
+            rows.append({"figure": "videobank_range", "case": f"real frames ({len(clips)} held-out clips)",
+                         "open_p99": round(float(np.percentile(cat["real"], 99)), 3),
+                         "closure_open_median": round(float(np.median(cat["real_closed"])), 3),
+                         "mouth_sharpness": round(float(np.nanmedian(cat["real_sharp"])), 1),
+                         "pops_p99": round(float(np.percentile(cat["real_pops"], grid.POPS_PERCENTILE)), 2)})
+            real_done = True
+        rows.append({"figure": "videobank_range", "case": label,
+                     "lip_r_mean": round(float(np.nanmean(got["r"])), 3),
+                     "std_ratio": round(float(cat["open"].std() / cat["real"].std()), 3),
+                     "open_p99": round(float(np.percentile(cat["open"], 99)), 3),
+                     "closure_open_median": round(float(np.median(cat["closed"])), 3),
+                     "mouth_sharpness": round(float(np.nanmedian(cat["sharp"])), 1),
+                     "sharpness_vs_real": round(float(np.nanmedian(cat["sharp"]) / np.nanmedian(cat["real_sharp"])), 3),
+                     "pictures_sharpness_vs_real": round(float(np.median(pictures) / np.nanmedian(cat["real_sharp"])), 3),
+                     "pops_p99": round(float(np.percentile(cat["pops"], grid.POPS_PERCENTILE)), 2),
+                     "pictures_above_nose_diff": round(above_nose_spread(bank), 2),
+                     "plate": made.report.get("face_plate", {}).get("frame")})

@@ -25,6 +25,10 @@ def add_parser(sub) -> None:
                    help="face: place lines from each image's face (face mesh); template: start from the "
                         "template's lines; auto: face when a face is found, else template (default)")
     p.add_argument("--rest", default=None, metavar="VISEME", help="the rest viseme (default: X, rest or sil)")
+    p.add_argument("--keep-photos", action="store_true",
+                   help="use the photos as they are; by default photos of one face become one face: the rest "
+                        "image everywhere but the lower face, each photo's mouth, jaw and chin pasted in "
+                        "(written to DIR/one-face/; the photos are never changed)")
     g = p.add_argument_group("mouth sprites on a character")
     g.add_argument("--over", default=None, metavar="BODY",
                    help="the character image the mouth sprites go on (copied into DIR if elsewhere): writes "
@@ -88,7 +92,7 @@ def run(args: argparse.Namespace) -> int:
         result = init_bank(args.folder, template=args.template, names=parse_names_option(args.names),
                            face_box=parse_face_box(args.face_box) if args.face_box else None,
                            layout=args.layout, rest=args.rest, force=args.force, lines=args.lines,
-                           composite=composite)
+                           composite=composite, keep_photos=args.keep_photos)
     except BaseException:
         if copied is not None:  # nothing half-done: the copy goes with the failed bank
             copied.unlink(missing_ok=True)
@@ -101,6 +105,9 @@ def run(args: argparse.Namespace) -> int:
           f"{w}x{h}, {result.layout} layout")
     for v, image in result.visemes.items():
         print(f"  {v:6s} {image}: lines from {result.lines.get(v, 'template')}")
+    if result.one_face:
+        print(f"  one face: the pictures are {result.visemes[result.rest]} outside the lower face, in "
+              f"{Path(args.folder) / 'one-face'} (--keep-photos uses the photos as they are)")
     if composite:
         x, y = composite["at"]
         print(f"  composite: the mouth goes on {composite['image']} at ({x:g}, {y:g}), scale {args.scale:g}: "

@@ -55,6 +55,11 @@ class VideoBankConfig:
         Every viseme's picture is the rest picture (the *plate*, eyes open) outside the
         lower face, with the chosen frame's mouth, jaw and chin pasted in
         (:mod:`lipsync.composite.face`); off: each picture is its own whole frame.
+    span : bool
+        Pictures span the speaker's range: an open shape's picture is chosen near its
+        candidates' median lip opening moved further from the rest's
+        (:data:`lipsync.videobank.select.SPAN_GAIN`); off: near the median (closures are the
+        closed ones either way).
     """
 
     map: str = DEFAULT_MAP
@@ -65,6 +70,7 @@ class VideoBankConfig:
     jobs: Optional[int] = None
     flows: bool = True
     one_face: bool = True
+    span: bool = True
 
     def __post_init__(self):
         if self.size is not None:

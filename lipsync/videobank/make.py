@@ -198,7 +198,7 @@ def make_bank(outdir: PathLike, videos: Sequence[PathLike], *, text: Optional[st
     ranked = select.rank(_candidates(footage, pmap.silence),
                          [select.FrameMeasures.of(tr.points, tr.fps, reg.residual)
                           for tr, reg in zip(footage.tracks, footage.regs)],
-                         closures=pmap.closures)
+                         closures=pmap.closures, rest=pmap.silence, span=select.SPAN_GAIN if cfg.span else 1.0)
     if pmap.silence not in ranked:
         raise InputError(f"no face in the pauses to take the rest shape ({pmap.silence}) from", path=footage.names)
     if cfg.one_face:

@@ -87,6 +87,33 @@ OPENING_WEIGHT = 1.0
 #: slightly-open B (kphotoalbum's demo webcam clip, tools/other_face.py: 0.049 against 0.044
 #: eye distances).
 CLOSURE_OPENING_PERCENTILE = 10
+#: The speaker's range (issue 28): an open shape's picture is chosen near its candidates'
+#: median lip opening moved this many times as far from the rest shape's median
+#: (``rest + SPAN_GAIN * (median - rest)``), not near the median itself. A viseme's
+#: candidates are every instance of it in every context; the renderer reaches a picture
+#: only in the middle of a held sound and coarticulation pulls it towards its neighbours
+#: (lipsync.coarticulation), so median pictures render a mouth that opens 0.58 times as
+#: much as the speaker's (std of the rendered inner-lip opening over the real one's; GRID
+#: s1, 30 held-out sentences, ``python -m lipsync.bench --only videobank_range``). Scaling
+#: the open shapes alike from the rest keeps the pattern of openings the timing blends (the
+#: dominance blend is affine in the pictures' openings), so its correlation with the real
+#: lips: with the ideal pictures, predicted r 0.777 for gains 1.0-1.6 and std ratios 0.67,
+#: 0.88, 1.01, 1.08 for 1.0, 1.3, 1.5, 1.6. Rendered (one face, B C D H spanning, opening
+#: weight 3): std 0.84, r 0.778 (median pictures: 0.58, 0.774). Measured and not taken: the
+#: 75th/80th percentile of B-E and H instead (std 0.77/0.98, r 0.767/0.762: a percentile
+#: moves each viseme by its own spread, not by how open it is); gain 1.5 with the opening
+#: weight 1 (the ranking's other terms won: D's picture at 0.12 for a 0.16 target, std 0.70,
+#: r 0.754); gain 1.3 (std 0.67); E spanning too (r 0.768).
+SPAN_GAIN = 1.5
+#: The shapes (Rhubarb names; other maps' visemes through their twins) whose pictures span
+#: the range: the open ones. E (rounded open), F (puckered) and G (F/V) show their shape,
+#: not an opening (with E spanning too: r 0.768 against 0.778).
+SPAN_SHAPES = "BCDH"
+#: With spanning pictures, the opening term weighs this much (:data:`OPENING_WEIGHT` without):
+#: the target lies away from the typical instance, and at weight 1 typicality, stillness and
+#: sharpness outvoted it (see :data:`SPAN_GAIN`).
+SPAN_OPENING_WEIGHT = 3.0
+
 #: A frame at half the sharpness of the viseme's sharpest finalist costs half a spread.
 SHARPNESS_WEIGHT = 1.0
 #: Eyes half as open as usual (but not a blink) cost this much.
@@ -224,28 +251,40 @@ class FrameMeasures:
 
 
 def rank(cands: Sequence[Candidate], measures: Sequence[FrameMeasures], *,
-         closures: Sequence[str] = ()) -> Dict[str, List[Candidate]]:
+         closures: Sequence[str] = (), rest: Optional[str] = None, span: float = 1.0) -> Dict[str, List[Candidate]]:
     """Candidates scored and sorted best first, per viseme (blinks left out when a viseme has
     other candidates). ``closures``: visemes whose pictures must show closed lips
-    (:data:`CLOSURE_OPENING_PERCENTILE`)."""
+    (:data:`CLOSURE_OPENING_PERCENTILE`). ``rest`` and ``span`` (:data:`SPAN_GAIN`): the
+    other visemes' openings are judged against their median moved ``span`` times as far from
+    the rest's median, and their typical shape is the median of the candidates opened about
+    that wide."""
     by: Dict[str, List[Candidate]] = {}
     for c in cands:
         by.setdefault(c.viseme, []).append(c)
     out = {}
+    rest_opening = (float(np.median([measures[c.video].opening[c.frame] for c in by[rest]]))
+                    if rest in by and span != 1.0 else None)
+    weight = OPENING_WEIGHT if rest_opening is None else SPAN_OPENING_WEIGHT
     for v, group in by.items():
         shapes = np.stack([measures[c.video].shape[c.frame] for c in group])
-        dist = np.linalg.norm(shapes - np.median(shapes, axis=0), axis=1)
-        typ = dist / max(float(np.median(dist)), 1e-9)
         opening = np.array([measures[c.video].opening[c.frame] for c in group])
         median = float(np.median(opening))
         mad = max(float(np.median(np.abs(opening - median))), 1e-6)
         # a closure: an opening one of its candidates has (the lowest of a few, a low one of many)
         mid = float(np.percentile(opening, CLOSURE_OPENING_PERCENTILE, method="lower")) if v in closures else median
+        like = np.ones(len(group), bool)
+        if rest_opening is not None and v not in closures and v != rest and rhubarb_shape(v) in set(SPAN_SHAPES):
+            mid = rest_opening + span * (median - rest_opening)
+            # the typical shape of the instances opened that wide, not of all of them
+            near = np.abs(opening - mid) <= mad
+            like = near if near.sum() >= 3 else like
+        dist = np.linalg.norm(shapes - np.median(shapes[like], axis=0), axis=1)
+        typ = dist / max(float(np.median(dist)), 1e-9)
         scored = []
         for c, t, o in zip(group, typ, opening):
             m = measures[c.video]
             eyes, motion, res = float(m.eyes[c.frame]), float(m.motion[c.frame]), float(m.residual[c.frame])
-            score = (float(t) + OPENING_WEIGHT * abs(float(o) - mid) / mad + motion / MOTION_SCALE
+            score = (float(t) + weight * abs(float(o) - mid) / mad + motion / MOTION_SCALE
                      + res / RESIDUAL_SCALE + EYES_WEIGHT * max(0.0, 1.0 - eyes))
             scored.append(replace(c, typicality=float(t), opening=float(o), motion=motion, eyes=eyes, residual=res,
                                   score=score))
