@@ -21,6 +21,7 @@ from lipsync.face import topology as T
 from lipsync.face.landmarks import FaceMesh
 from lipsync.face.video import probe_video, read_video
 from lipsync.readers.grid import read_words
+from test_videobank import _write_video  # the clips re-encoded as a camera would (H.264, crf 12)
 
 GRID = Path(__file__).parent / "data" / "grid-s1"
 #: The bank; the video dubbed (its first 2 s: the 3 s speech plays it forwards and back);
@@ -34,20 +35,6 @@ COVERED = range(30, 34)
 def _transcript(clip: str) -> str:
     p = GRID / f"{clip}.align"
     return " ".join(s.label for s in read_words(str(p), p.read_bytes()))
-
-
-def _write_video(path: Path, frames, audio=None, fps=25):
-    import imageio_ffmpeg
-
-    h, w = frames[0].shape[:2]
-    kw = {"audio_path": str(audio), "audio_codec": "aac"} if audio else {}
-    gen = imageio_ffmpeg.write_frames(str(path), (w, h), fps=fps, codec="libx264", pix_fmt_out="yuv420p",
-                                      macro_block_size=1, output_params=["-crf", "10"], **kw)
-    gen.send(None)
-    for f in frames:
-        gen.send(np.ascontiguousarray(f))
-    gen.close()
-    return path
 
 
 def _grey(f):
