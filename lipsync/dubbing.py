@@ -41,8 +41,8 @@ __all__ = ["dub", "DubReport", "DubWarning", "cache_root", "lost_frames_text"]
 #: Cache format: bump when what an entry holds changes (older entries are then misses).
 CACHE_VERSION = 1
 #: Decoded plate frames kept for playing the video backwards (speech longer than the
-#: video) are held in a temporary file beside the output rather than in memory: a 30 s
-#: 720p video is 2 GB of RGB.
+#: video) are held in a temporary file beside the output (``.OUT.partial-PID.plate-frames``)
+#: rather than in memory: a 30 s 720p video is 2 GB of RGB.
 _MEMMAP_SUFFIX = ".plate-frames"
 
 
@@ -253,7 +253,7 @@ class _PlateReader:
     """The video's frames by index for render threads: decoded once, in order; kept in a
     temporary file only when the speech outlasts the video (played backwards)."""
 
-    def __init__(self, video: Path, info, *, keep: bool, scratch_dir: Path):
+    def __init__(self, video: Path, info, *, keep: bool, output: Path):
         from .face.video import read_video
 
         self._gen = read_video(video, info=info)
@@ -263,17 +263,17 @@ class _PlateReader:
         self._shape = (info.size[1], info.size[0], 3)
         self._store = None
         self._path = None
-        self.count = None
         self._keep = keep
-        self._scratch_dir = scratch_dir
+        self._output = output
 
     def _grow_store(self, n: int):
         if self._store is None:
-            import tempfile
+            from ._files import partial_name
 
-            fd, name = tempfile.mkstemp(prefix=".lipsync-dub-", suffix=_MEMMAP_SUFFIX, dir=self._scratch_dir)
-            os.close(fd)
-            self._path = Path(name)
+            # beside the output, named as its partials are: a killed run's is removed by the
+            # next write of the output (lipsync._files.remove_stale_partials)
+            self._path = self._output.parent / partial_name(self._output, _MEMMAP_SUFFIX)
+            self._path.touch()
             self._cap = 0
         if n > self._cap:
             cap = max(n, 2 * self._cap, 64)
@@ -311,8 +311,7 @@ class _PlateReader:
 
 def dub(video: PathLike, audio: PathLike, output: PathLike, *, text: Optional[str] = None, bank=None,
         video_text: Optional[str] = None, map=None, timing=None, crf: int = 18, preset: Optional[str] = None,
-        store=None,
-        jobs: Optional[int] = None, quiet: bool = False, cache: Optional[PathLike] = None) -> DubReport:
+        store=None, jobs: Optional[int] = None, quiet: bool = False, cache: Optional[PathLike] = None) -> DubReport:
     """Re-voice ``video`` with the speech in ``audio`` (``lipsync dub``).
 
     Parameters
@@ -439,7 +438,7 @@ def dub(video: PathLike, audio: PathLike, output: PathLike, *, text: Optional[st
     bank_shape = anim.renderer.shape + (anim.renderer.channels,)
     scratch = threading.local()
     output.parent.mkdir(parents=True, exist_ok=True)
-    reader = _PlateReader(video, info, keep=n > nv, scratch_dir=output.parent)
+    reader = _PlateReader(video, info, keep=n > nv, output=output)
     shape = (info.size[1], info.size[0], 3)
     geometry = [compositor.geometry(p, shape) if found else None for p, found in zip(poses, track.found)]
 

@@ -122,6 +122,7 @@ def test_dub_has_the_new_speech_length_and_plays_the_video_back_and_forth(dubbed
     assert info.has_audio and info.size == (360, 288) and info.fps == 25
     assert len(frames) == report.frames == int(np.ceil(speech_s * 25 - 1e-6))
     assert len(frames) > CUT_FRAMES  # longer than the video: it is played backwards too
+    assert not list(out.parent.glob(".dub.mp4.partial*"))  # the frames kept for the way back are gone
     sound_s = len(load_audio(out)) / 16000
     assert abs(sound_s - len(frames) / 25) < 0.05 and abs(sound_s - speech_s) < 0.05
     # frame by frame, the eye region is the input's own frame pingpong(i): that frame fits
