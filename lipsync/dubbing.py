@@ -46,6 +46,10 @@ CACHE_VERSION = 1
 _MEMMAP_SUFFIX = ".plate-frames"
 
 
+#: Output formats with a sound track (lipsync.encode): H.264 + AAC, VP9 + Opus, ProRes + PCM.
+SOUND_FORMATS = ("mp4", "webm", "mov")
+
+
 class DubWarning(UserWarning):
     """Something the dub could not do everywhere (frames without a face, ...)."""
 
@@ -373,7 +377,7 @@ def dub(video: PathLike, audio: PathLike, output: PathLike, *, text: Optional[st
     from .animator import Animator
     from .bank import Bank
     from .clip import DEFAULT_PRESET, SINGLE_ENCODER_THREAD_CORES, render_parallel
-    from .encode import open_writer
+    from .encode import format_for, open_writer
     from .encode.mp4 import check_preset
     from .face.landmarks import FaceMesh
     from .face.video import probe_video
@@ -387,6 +391,10 @@ def dub(video: PathLike, audio: PathLike, output: PathLike, *, text: Optional[st
     if not 0 <= crf <= 51:
         raise InputError(f"--crf must be 0..51, got {crf}")
     video, audio, output = Path(os.fspath(video)), Path(os.fspath(audio)), Path(os.fspath(output))
+    out_format = format_for(output)
+    if out_format not in SOUND_FORMATS:
+        raise InputError(f"a dub is a video with sound: write {', '.join('.' + f for f in SOUND_FORMATS)} "
+                         f"(got {out_format})", path=output)
     info = probe_video(video)
     samples = load_audio(audio)  # AudioError (an InputError) naming a file without sound
     if samples.size == 0:
@@ -455,7 +463,7 @@ def dub(video: PathLike, audio: PathLike, output: PathLike, *, text: Optional[st
     w, h = info.size
     encoder_threads = 1 if (os.cpu_count() or 1) <= SINGLE_ENCODER_THREAD_CORES else None
     try:
-        with open_writer(output, fps=info.fps, size=(w, h), format="mp4", audio=audio, crf=crf, preset=preset,
+        with open_writer(output, fps=info.fps, size=(w, h), format=out_format, audio=audio, crf=crf, preset=preset,
                          quiet=True, frames=n, threads=encoder_threads) as writer:
             with tqdm(total=n, desc="dub", unit="frame", disable=quiet, leave=False) as bar:
                 render_parallel(render_into, n, (h, w, 3), writer.write_prepared, progress=lambda d: bar.update(1),
