@@ -241,3 +241,28 @@ def test_render_lives_on_the_plate_and_still_turns_it_off(bank):
     y0 = top
     m = int(0.6 * 25)
     assert np.abs(live.frame(m)[y0:].astype(np.int16) - plate.frames[pingpong(m, n)][y0:]).mean() > 1.0
+
+
+def test_a_broken_cache_entry_is_a_miss(cut, tmp_path):
+    from lipsync.bank import Bank
+    from lipsync.dubbing import bank_from_video, video_track
+
+    video = GRID / f"{VIDEO}.mpg"
+    info = probe_video(video)
+    entry = tmp_path / "entry"
+    entry.mkdir()
+    (entry / "track.npz").write_bytes(b"not a track")  # e.g. a disk that filled up
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        track = video_track(video, info, entry=entry, quiet=True)
+    assert len(track) == 75 and track.found.all()
+    again = video_track(video, info, entry=entry, quiet=True)  # now from the cache, the same points
+    assert np.allclose(again.points, track.points, equal_nan=True)
+    # a bank folder whose bank.yaml does not load is made again from the video
+    text = _transcript(VIDEO)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        first = bank_from_video(video, entry=entry, text=text)
+        (first.path / "bank.yaml").write_text("name: [broken\n")
+        second = bank_from_video(video, entry=entry, text=text)
+    assert second.path == first.path and isinstance(second, Bank) and second.plate is not None
