@@ -169,7 +169,8 @@ class Animator:
         mouth = getattr(self._mouth, "frame", None)
         if mouth is None:
             mouth = self._mouth.frame = np.empty_like(out)
-        self.renderer.render(spec.from_viseme, spec.to_viseme, spec.alpha, out=mouth)
+        # only the lower face's box of the morph is read: only that box is rendered
+        self.renderer.render(spec.from_viseme, spec.to_viseme, spec.alpha, out=mouth, region=self.plate.region)
         return self.plate.render_into(index, self.fps, mouth, out)
 
     def same_as_previous(self, index: int) -> bool:

@@ -458,7 +458,9 @@ def dub(video: PathLike, audio: PathLike, output: PathLike, *, text: Optional[st
         mouth = getattr(scratch, "frame", None)
         if mouth is None:
             mouth = scratch.frame = np.empty(bank_shape, np.uint8)
-        compositor.apply(anim.frame(i, out=mouth)[..., :3], buf, poses[j], geometry[j])
+        s = anim.specs[i]  # only the lower face's box of the morph is read: only that box is rendered
+        anim.renderer.render(s.from_viseme, s.to_viseme, s.alpha, out=mouth, region=compositor.region)
+        compositor.apply(mouth[..., :3], buf, poses[j], geometry[j])
 
     w, h = info.size
     encoder_threads = 1 if (os.cpu_count() or 1) <= SINGLE_ENCODER_THREAD_CORES else None

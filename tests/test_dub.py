@@ -266,3 +266,24 @@ def test_a_broken_cache_entry_is_a_miss(cut, tmp_path):
         (first.path / "bank.yaml").write_text("name: [broken\n")
         second = bank_from_video(video, entry=entry, text=text)
     assert second.path == first.path and isinstance(second, Bank) and second.plate is not None
+
+
+@pytest.mark.parametrize("method", ["flow", "splat"])
+def test_rendering_a_region_gives_the_full_frames_pixels_there(bank, method):
+    from lipsync.bank import Bank
+    from lipsync.render import Renderer, available_kernels
+    from lipsync.store import Crop
+
+    b = Bank.load(bank)
+    h, w = b.shape
+    for kernel in available_kernels() if method == "flow" else [None]:
+        r = Renderer(b, method=method, kernel=kernel)
+        for reg in (Crop(h // 2, h - 10, w // 4, 3 * w // 4), Crop(0, h, 0, w),
+                    Crop(h // 2, h // 2 + 6, w // 2, w // 2 + 6), Crop(0, 4, 0, 4)):
+            for a, z, alpha in (("X", "D", 0.3), ("A", "C", 0.7)):
+                full = r.render(a, z, alpha, out=np.empty((h, w, 3), np.uint8))
+                part = np.zeros((h, w, 3), np.uint8)
+                r.render(a, z, alpha, out=part, region=reg)
+                box = (slice(reg.y0, reg.y1), slice(reg.x0, reg.x1))
+                assert np.array_equal(part[box], full[box]), (kernel, reg, a, z)
+                assert not part[:reg.y0].any() and not part[reg.y1:].any()  # rows outside: untouched

@@ -240,7 +240,7 @@ def cost_per_frame(bank_path: Path, video: Path, speech: Path, text: str, repeat
         j = i % nv
         np.copyto(big, frames[j])
         s = specs[i]
-        still.renderer.render(s.from_viseme, s.to_viseme, s.alpha, out=mouth)
+        still.renderer.render(s.from_viseme, s.to_viseme, s.alpha, out=mouth, region=comp.region)
         comp.apply(mouth, big, poses[j], geometry[j])
 
     out["dub_ms"] = per_frame(dub_frame)
