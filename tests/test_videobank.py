@@ -282,15 +282,44 @@ def test_pictures_span_the_speakers_range(made, mesh):
             seen.setdefault(c.viseme, []).append(float(opening[c.frame]))
     png = {v: float(M.lip_opening(mesh.find(bank.images[v][..., :3]))) for v in bank.names}
     rank = {v: float(np.mean(np.array(seen[v]) <= png[v])) for v in seen}
-    # open shapes: on average in the upper part of their instances' openings (each viseme has
-    # only 3-14 instances in two sentences: one rank alone is coarse); median pictures were
-    # at about one half
-    assert np.mean([rank[v] for v in "BCDH"]) >= 0.65, rank
+    # open shapes: their pictures open further from the rest than their instances' median,
+    # by about SPAN_GAIN (1.5) on average (median pictures measured 1.12 here; one viseme
+    # alone is coarse, with 3-14 instances in two sentences)
+    rest = float(np.median(seen["X"]))
+    spread = [(png[v] - rest) / (float(np.median(seen[v])) - rest) for v in "BCDH"]
+    assert np.mean(spread) >= 1.35, dict(zip("BCDH", spread))
     # closed lips for P B M; at rest relaxed, not the parted-lips tail of the pauses
     assert rank["A"] <= 0.5 and rank["X"] <= 0.9, rank
     # and the widest picture reaches the wide end of what the speaker shows (all open shapes)
     wide = np.concatenate([seen[v] for v in "CDH"])
     assert max(png[v] for v in "CDH") >= np.percentile(wide, 80), (png, np.percentile(wide, [50, 80, 90]))
+
+
+def test_spanning_ranks_open_shapes_by_the_scaled_opening():
+    """rank(span=g): an open shape's best candidate is the one nearest rest + g (median - rest)
+    when nothing else differs; closures and other shapes keep their rules."""
+    from lipsync.videobank.select import SPAN_GAIN
+
+    n = 21
+    rest_open = np.full(n, 0.02) + np.linspace(-0.004, 0.004, n)
+    d_open = np.linspace(0.05, 0.25, n)            # median 0.15
+    a_open = np.linspace(0.02, 0.06, n)
+    opening = np.concatenate([rest_open, d_open, a_open])
+    shape = np.zeros((3 * n, 80))
+    shape[:, 0] = opening                          # the mouth shape follows the opening
+    measures = [FrameMeasures(shape=shape, opening=opening, motion=np.zeros(3 * n), eyes=np.ones(3 * n),
+                              residual=np.zeros(3 * n))]
+    cands = [Candidate(video=0, frame=i, time=i / 25, viseme=v, span=(0, 1))
+             for v, k in (("X", 0), ("D", n), ("A", 2 * n)) for i in range(k, k + n)]
+    plain = rank(cands, measures, closures=["A"])
+    spanning = rank(cands, measures, closures=["A"], rest="X", span=SPAN_GAIN)
+    assert plain["D"][0].opening == pytest.approx(0.15)
+    target = 0.02 + SPAN_GAIN * (0.15 - 0.02)       # 0.215
+    best = min(d_open, key=lambda x: abs(x - target))
+    assert spanning["D"][0].opening == pytest.approx(best)
+    # the closure is the closed one either way, the rest its median
+    assert plain["A"][0].opening == spanning["A"][0].opening == pytest.approx(a_open[2])
+    assert spanning["X"][0].opening == plain["X"][0].opening == pytest.approx(0.02)
 
 
 def test_chosen_frames_show_their_shapes(made, mesh):

@@ -97,8 +97,8 @@ def lower_face_polygon(jaw_l: np.ndarray, jaw_r: np.ndarray, nose_base_l: np.nda
     nose_base_l, nose_base_r : numpy.ndarray
         ``(M, 2)`` the nose's lower edge from each wing to the point under the tip.
     grow : float
-        Pixels the jaw and chin are pushed outwards (each point along the jaw's outward
-        normal; the two ends at the wings' level sideways, keeping the top edge's height).
+        Pixels the chin is pushed outwards along the jaw's outward normal; the jaw's points
+        less, in proportion to their depth below the wings' level (none at that level).
 
     Returns
     -------
@@ -128,9 +128,12 @@ def lower_face_polygon(jaw_l: np.ndarray, jaw_r: np.ndarray, nose_base_l: np.nda
         normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-12)
         centre = np.vstack([nl, nr]).mean(axis=0)
         normal *= np.where(((jaw - centre) * normal).sum(axis=1, keepdims=True) < 0, -1.0, 1.0)
-        jaw = jaw + grow * normal
-        jaw[0] = left[0] - grow * across
-        jaw[-1] = right[0] + grow * across
+        # full growth at the chin, none at the wings' level: beside the cheeks the face's
+        # edge meets the background, and a frame's edge a pixel or two off the plate's would
+        # paste a sliver of skin onto it
+        depth = jaw @ down - level
+        taper = np.clip(depth / max(float(depth.max()), 1e-9), 0.0, 1.0)[:, None]
+        jaw = jaw + grow * taper * normal
     return np.vstack([jaw, nr, nl[::-1][1:]])
 
 
@@ -261,7 +264,14 @@ def pose_onto(points: np.ndarray, target: np.ndarray, *, anchors: Sequence[int] 
 
 
 def skin_ring(mask: np.ndarray, width: float) -> np.ndarray:
-    """Boolean ``(H, W)``: pixels outside ``mask`` (0 there) within ``width`` pixels of it."""
+    """Boolean ``(H, W)``: pixels outside ``mask`` (0 there) within ``width`` pixels of it.
+
+    Examples
+    --------
+    >>> m = np.zeros((9, 9), np.float32); m[4, 4] = 1.0
+    >>> skin_ring(m, 1.0).sum(), bool(skin_ring(m, 1.0)[4, 4])      # the 4 neighbours, not the centre
+    (np.int64(4), False)
+    """
     import cv2
 
     outside = (mask <= 0).astype(np.uint8)
@@ -318,7 +328,13 @@ def colour_match(source: np.ndarray, target: np.ndarray, where: np.ndarray, *, o
 
 
 def apply_colour(image: np.ndarray, gain: np.ndarray, offset: np.ndarray) -> np.ndarray:
-    """``image`` (uint8, RGB or RGBA) with ``gain * value + offset`` per colour channel (a lookup table)."""
+    """``image`` (uint8, RGB or RGBA) with ``gain * value + offset`` per colour channel (a lookup table).
+
+    Examples
+    --------
+    >>> apply_colour(np.full((1, 1, 4), 100, np.uint8), np.array([1.1, 1.0, 0.5]), np.zeros(3))[0, 0].tolist()
+    [110, 100, 50, 100]
+    """
     lut = np.clip(np.round(np.arange(256)[:, None] * np.asarray(gain)[None, :] + np.asarray(offset)[None, :]),
                   0, 255).astype(np.uint8)
     out = image.copy()
