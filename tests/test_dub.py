@@ -287,3 +287,24 @@ def test_rendering_a_region_gives_the_full_frames_pixels_there(bank, method):
                 box = (slice(reg.y0, reg.y1), slice(reg.x0, reg.x1))
                 assert np.array_equal(part[box], full[box]), (kernel, reg, a, z)
                 assert not part[:reg.y0].any() and not part[reg.y1:].any()  # rows outside: untouched
+
+
+def test_bank_yaml_switches_the_plate_off_and_a_missing_plate_file_is_named(bank, tmp_path):
+    import shutil
+
+    from lipsync.animator import Animator
+    from lipsync.bank import Bank
+    from lipsync.errors import BankError
+    from lipsync.timeline import Segment, Timeline
+
+    copy = tmp_path / "bank"
+    shutil.copytree(bank, copy, ignore=shutil.ignore_patterns(".lipsync"))
+    text = (copy / "bank.yaml").read_text()
+    assert "plate: {video: plate.mp4, poses: plate.json, mask: plate-mask.png}" in text
+    (copy / "bank.yaml").write_text(text.replace("mask: plate-mask.png}", "mask: plate-mask.png, enabled: false}"))
+    tl = Timeline((Segment(0.0, 0.5, "sil"),), kind="phoneme")
+    assert Animator(Bank.load(copy), tl).plate is None
+    (copy / "bank.yaml").write_text(text)
+    (copy / "plate.json").unlink()
+    with pytest.raises(BankError, match="plate poses: file 'plate.json' not found"):
+        Bank.load(copy)
