@@ -181,7 +181,7 @@ def video_track(video: Path, info, *, entry: Optional[Path], quiet: bool, mesh=N
 
 
 def bank_from_video(video: Path, *, entry: Path, map=None, text: Optional[str] = None, jobs=None,
-                    quiet: bool = True):
+                    quiet: bool = True, track=None):
     """The bank ``lipsync init OUT --video VIDEO [--text TEXT]`` makes, cached in ``entry``
     (one per map and transcript)."""
     from .bank import Bank
@@ -196,7 +196,8 @@ def bank_from_video(video: Path, *, entry: Path, map=None, text: Optional[str] =
             shutil.rmtree(folder, ignore_errors=True)
     folder.parent.mkdir(parents=True, exist_ok=True)
     options = {"map": os.fspath(map)} if map is not None else {}
-    make_bank(folder, [video], text=text, force=True, quiet=quiet, jobs=jobs, **options)
+    make_bank(folder, [video], text=text, force=True, quiet=quiet, jobs=jobs,
+              tracks={video: track} if track is not None else None, **options)
     return Bank.load(folder)
 
 
@@ -410,7 +411,7 @@ def dub(video: PathLike, audio: PathLike, output: PathLike, *, text: Optional[st
 
     t = time.perf_counter()
     if bank is None:
-        bank = bank_from_video(video, entry=entry, map=map, text=video_text, jobs=jobs, quiet=quiet)
+        bank = bank_from_video(video, entry=entry, map=map, text=video_text, jobs=jobs, quiet=quiet, track=track)
     elif not isinstance(bank, Bank):
         bank = Bank.load(bank)
     seconds["bank"] = time.perf_counter() - t
