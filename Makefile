@@ -67,3 +67,4 @@ docs-images: $(STAMP)
 	$(BIN)/python tools/face_overlay.py docs/face-lines.jpg
 	$(BIN)/python tools/atlas_picture.py docs/atlas.jpg
 	$(BIN)/python tools/real_strip.py docs/strip-real.png
+	$(BIN)/python tools/dub_strip.py docs/strip-dub.png

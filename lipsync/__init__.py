@@ -42,6 +42,7 @@ _EXPORTS = {
     "LiveAnimator": "live",
     "render_clip": "clip",
     "write_video": "clip",
+    "dub": "dubbing",
 }
 _SUBMODULES = {"warp", "bank", "normalise", "flows", "store", "render", "timeline", "phonemes",
                "sequencer", "timing", "coarticulation", "encode", "animator", "registry", "errors", "cli", "preview", "clip", "live",

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import math
 import os
+import threading
 from typing import Iterator, List, Optional, Union
 
 import numpy as np
@@ -61,6 +62,11 @@ class Animator:
     timeline_options : argparse.Namespace, optional
         Reader options (``timeline_format``, ``tier``, ``sample_rate``, ``moho_fps``, and
         ``text``, an audio file's transcript) used when ``timeline`` is a path.
+    still : bool
+        Show the bank's still pictures even when it has an idle plate (bank.yaml ``plate:``,
+        banks made from video). By default frame i of such a bank is plate frame
+        :meth:`lipsync.composite.plate.Plate.index` with the morphed lower face on it
+        (:mod:`lipsync.composite.plate`): the speaker's own blinks and head motion.
 
     Attributes
     ----------
@@ -68,11 +74,13 @@ class Animator:
         One per frame: ``(from_viseme, to_viseme, alpha)``.
     visemes : Timeline
         The mapped viseme timeline.
+    plate : lipsync.composite.plate.Plate or None
+        The idle plate frames are composited onto (None: the still pictures).
     """
 
     def __init__(self, bank: Union[Bank, str, "os.PathLike[str]"], timeline, fps: float = DEFAULT_FPS, *,
                  map: Union[str, "os.PathLike[str]", PhonemeMap, None] = None, method: str = "flow",
-                 timing=None, store: Optional[FlowStore] = None, timeline_options=None):
+                 timing=None, store: Optional[FlowStore] = None, timeline_options=None, still: bool = False):
         self.bank = bank if isinstance(bank, Bank) else Bank.load(bank)
         self.fps = check_fps(fps)
         if not isinstance(timeline, Timeline):
@@ -89,6 +97,16 @@ class Animator:
         self.specs: List[FrameSpec] = sequence(self.visemes, fps=self.fps, rest=self.bank.rest, timing=self.timing,
                                                closures=pmap.closures, classes=viseme_classes(pmap, self.bank.rest))
         self.renderer = Renderer(self.bank, method=method, store=store)
+        self._attach_plate(still)
+
+    def _attach_plate(self, still: bool) -> None:
+        """The bank's idle plate to composite onto, unless ``still`` (or the bank has none)."""
+        self.plate = None
+        if not still and self.bank.plate is not None and self.bank.channels == 3:
+            from .composite.plate import load_plate
+
+            self.plate = load_plate(self.bank)
+            self._mouth = threading.local()  # each render thread its own morphed frame
 
     @classmethod
     def from_audio(cls, bank: Union[Bank, str, "os.PathLike[str]"], audio, text: Optional[str] = None,
@@ -150,7 +168,14 @@ class Animator:
         spec = self.specs[index]
         if out is None:
             out = np.empty(self.renderer.shape + (self.renderer.channels,), np.uint8)
-        return self.renderer.render(spec.from_viseme, spec.to_viseme, spec.alpha, out=out)
+        if self.plate is None:
+            return self.renderer.render(spec.from_viseme, spec.to_viseme, spec.alpha, out=out)
+        mouth = getattr(self._mouth, "frame", None)
+        if mouth is None:
+            mouth = self._mouth.frame = np.empty_like(out)
+        # only the lower face's box of the morph is read: only that box is rendered
+        self.renderer.render(spec.from_viseme, spec.to_viseme, spec.alpha, out=mouth, region=self.plate.region)
+        return self.plate.render_into(index, self.fps, mouth, out)
 
     def same_as_previous(self, index: int) -> bool:
         """Whether frame ``index`` is identical to frame ``index - 1`` (a held shape).
@@ -166,7 +191,7 @@ class Animator:
         >>> a.same_as_previous(0), a.same_as_previous(5)
         (False, True)
         """
-        if not 0 < index < len(self.specs):
+        if not 0 < index < len(self.specs) or self.plate is not None:  # a plate moves in every frame
             return False
         return _still_key(self.specs[index]) == _still_key(self.specs[index - 1])
 
@@ -201,6 +226,12 @@ class Animator:
         With ``copy=False`` each yielded array is the renderer's buffer, valid until the
         next frame is requested: the fast path for streaming to an encoder.
         """
+        if self.plate is not None:
+            buf = np.empty(self.renderer.shape + (self.renderer.channels,), np.uint8)
+            for i in range(len(self.specs)):
+                frame = self.frame(i, out=buf)
+                yield frame.copy() if copy else frame
+            return
         for spec in self.specs:
             frame = self.renderer.render(spec.from_viseme, spec.to_viseme, spec.alpha)
             yield frame.copy() if copy else frame

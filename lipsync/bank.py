@@ -28,11 +28,12 @@ expanded lines are what every later stage (normalisation, flows, the store key) 
 from __future__ import annotations
 
 import hashlib
+import math
 import os
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Dict, List, Optional, Tuple, Union
+from typing import Dict, List, Optional, Sequence, Tuple, Union
 
 import numpy as np
 import yaml
@@ -43,8 +44,6 @@ from .coarticulation import DominanceOverrides, DominanceParams
 from .errors import BankError, InputError
 from .timing import check_timing
 
-if TYPE_CHECKING:  # pragma: no cover
-    from .composite import Composite
 
 #: Refuse images above this many pixels (8K UHD): a decompression bomb or a mistake, and
 #: each flow of such a size would need hundreds of MB.
@@ -82,6 +81,58 @@ class WarpParams(BaseModel):
     p: float = Field(0.5, ge=0, le=2)
 
 
+#: Largest mouth scale on a body: beyond it a mouth sprite is a blur of its pixels.
+MAX_SCALE = 16.0
+
+
+@dataclass(frozen=True)
+class Composite:
+    """A body image and where the mouth goes on it.
+
+    Attributes
+    ----------
+    image : numpy.ndarray
+        The body, RGB ``(H, W, 3)`` or straight RGBA ``(H, W, 4)`` ``uint8``.
+    at : (float, float)
+        The body pixel the mouth image's centre lands on.
+    scale : float
+        The mouth's size on the body relative to the bank's images.
+    path : Path, optional
+        Where the body image came from (for messages).
+    """
+
+    image: np.ndarray
+    at: Tuple[float, float]
+    scale: float = 1.0
+    path: Optional[Path] = None
+
+    def replace(self, *, image=None, at=None, scale=None, path=None) -> "Composite":
+        return Composite(self.image if image is None else image, self.at if at is None else at,
+                         self.scale if scale is None else scale, self.path if path is None else path)
+
+
+def check_placement(body_shape: Sequence[int], at: Sequence[float], scale: float) -> Optional[str]:
+    """What is wrong with a mouth centre ``at`` and ``scale`` on a body of ``body_shape``, or None.
+
+    Examples
+    --------
+    >>> check_placement((100, 80), (10, 20), 1.0) is None
+    True
+    >>> check_placement((100, 80), (90, 20), 1.0)
+    'at [90, 20] lies outside the 80x100 body image'
+    """
+    h, w = body_shape[:2]
+    if len(at) != 2 or not all(isinstance(v, (int, float)) and math.isfinite(v) for v in at):
+        return f"at must be two finite numbers [x, y], got {list(at)}"
+    if not (isinstance(scale, (int, float)) and math.isfinite(scale) and 0 < scale <= MAX_SCALE):
+        return f"scale must be a number in (0, {MAX_SCALE:g}], got {scale}"
+    x, y = at
+    if not (-0.5 <= x <= w - 0.5 and -0.5 <= y <= h - 0.5):
+        return f"at [{x:g}, {y:g}] lies outside the {w}x{h} body image"
+    return None
+
+
+
 class _VisemeSpec(BaseModel):
     model_config = ConfigDict(extra="forbid")
     image: str
@@ -94,6 +145,27 @@ class _CompositeSpec(BaseModel):
     image: str
     at: Tuple[float, float]
     scale: float = 1.0
+
+
+class _PlateSpec(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    video: str
+    poses: str
+    mask: str
+    # bank.yaml's switch: false keeps the files but renders the still pictures
+    enabled: bool = True
+
+
+@dataclass(frozen=True)
+class PlateFiles:
+    """bank.yaml ``plate:`` (a bank made from video): the speaker's idle stretch of video,
+    each frame's pose, and the lower-face mask (:mod:`lipsync.videobank.plate`); loaded by
+    :func:`lipsync.composite.plate.load_plate` when a render needs it."""
+
+    video: Path
+    poses: Path
+    mask: Path
+    enabled: bool = True
 
 
 class _BankSpec(BaseModel):
@@ -111,6 +183,7 @@ class _BankSpec(BaseModel):
     coarticulation: Optional[DominanceOverrides] = None
     visemes: Dict[str, _VisemeSpec]
     composite: Optional[_CompositeSpec] = None
+    plate: Optional[_PlateSpec] = None
 
     @field_validator("timing")
     @classmethod
@@ -304,6 +377,9 @@ class Bank:
     coarticulation : DominanceParams or None
         bank.yaml's ``coarticulation``: the dominance model's constants fitted to this
         speaker (keys it leaves out keep :data:`lipsync.coarticulation.DEFAULT_PARAMS`).
+    plate : PlateFiles or None
+        bank.yaml's ``plate``: the idle stretch of the speaker's video a render composites
+        the morphed lower face onto (banks made from video; ``enabled: false`` turns it off).
 
     Examples
     --------
@@ -327,6 +403,7 @@ class Bank:
     timing: Optional[str] = None
     coarticulation: Optional[DominanceParams] = field(default=None, repr=False)
     refine: bool = True
+    plate: Optional[PlateFiles] = field(default=None, repr=False)
 
     @property
     def feature_names(self) -> Tuple[str, ...]:
@@ -883,8 +960,6 @@ def _build(root, data, folder: Path, yaml_path: Path, image_cache) -> Bank:
 
     composite = None
     if spec.composite is not None:
-        from .composite import Composite, check_placement
-
         c = spec.composite
         keys = ["composite", "image"]
         real = inside(c.image, "composite", keys)
@@ -897,7 +972,18 @@ def _build(root, data, folder: Path, yaml_path: Path, image_cache) -> Bank:
             fail(f"composite ({c.image!r}): {problem}", ["composite", "scale" if "scale" in problem else "at"])
         composite = Composite(image=body, at=(float(c.at[0]), float(c.at[1])), scale=float(c.scale), path=real)
 
+    plate = None
+    if spec.plate is not None:
+        files = {}
+        for key in ("video", "poses", "mask"):
+            rel = getattr(spec.plate, key)
+            real = inside(rel, f"plate {key}", ["plate", key])
+            if not real.is_file():
+                fail(f"plate {key}: file {rel!r} not found", ["plate", key])
+            files[key] = real
+        plate = PlateFiles(enabled=spec.plate.enabled, **files)
+
     return Bank(path=folder, name=spec.name, rest=spec.rest, warp=spec.warp, symmetry=spec.symmetry,
                 names=names, line_names=tuple(line_names), images=images, lines=lines, features=features,
-                composite=composite, timing=spec.timing, refine=spec.refine,
+                composite=composite, timing=spec.timing, refine=spec.refine, plate=plate,
                 coarticulation=spec.coarticulation.apply() if spec.coarticulation is not None else None)

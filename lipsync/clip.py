@@ -176,7 +176,7 @@ def render_clip(timeline, output: PathLike, *, bank=None, audio: Optional[PathLi
                 format: Optional[str] = None, crf: int = DEFAULT_CRF, preset: str = DEFAULT_PRESET,
                 store=None, jobs: Optional[int] = None, quiet: bool = False,
                 timeline_options=None, progress=None, background=None, composite=None,
-                lang: Optional[str] = None, live=None) -> ClipReport:
+                lang: Optional[str] = None, live=None, still: bool = False) -> ClipReport:
     """Render one clip to ``output`` (a video, an animation, or a folder of numbered PNGs).
 
     Parameters
@@ -224,6 +224,11 @@ def render_clip(timeline, output: PathLike, *, bank=None, audio: Optional[PathLi
         Render what a live session fed the audio in real time shows
         (:func:`lipsync.live.offline.live_specs`; ``timeline`` must be audio): the audio
         look-ahead in seconds, or True for the default.
+    still : bool
+        Render the bank's still pictures even when it has an idle plate (bank.yaml
+        ``plate:``, banks made from video): by default each frame's lower face is
+        composited onto the plate frame due at that time (:mod:`lipsync.composite.plate`),
+        so the speaker blinks and moves.
 
     Returns
     -------
@@ -277,10 +282,12 @@ def render_clip(timeline, output: PathLike, *, bank=None, audio: Optional[PathLi
         from .live.offline import LiveClip
 
         anim = LiveClip(bank, timeline, fps=fps, lookahead=None if live is True else live, map=map,
-                        method=method, timing=timing, store=store, quiet=quiet)
+                        method=method, timing=timing, store=store, quiet=quiet,
+                        still=still or not compositor.passthrough)
     else:
+        # the idle plate (a bank made from video) only where the frame is the bank's picture itself
         anim = Animator(bank, timeline, fps=fps, map=map, method=method, timing=timing, store=store,
-                        timeline_options=timeline_options)
+                        timeline_options=timeline_options, still=still or not compositor.passthrough)
     n = len(anim)
     if n == 0:  # a video needs a frame; a timeline of no length has none to show (README: Rendering)
         where = getattr(timeline, "path", None) if hasattr(timeline, "segments") else os.fspath(timeline)

@@ -250,6 +250,12 @@ def _difference_box(a: np.ndarray, b: np.ndarray) -> Crop:
     return Crop(int(rows[0]), int(rows[-1]) + 1, int(cols[0]), int(cols[-1]) + 1)
 
 
+def _intersect(a: Crop, b: Crop) -> Crop:
+    """The part of box ``a`` inside box ``b`` (empty when they do not meet)."""
+    c = Crop(max(a.y0, b.y0), min(a.y1, b.y1), max(a.x0, b.x0), min(a.x1, b.x1))
+    return c if not c.empty else Crop(0, 0, 0, 0)
+
+
 def _copy_outside(dst: np.ndarray, src: np.ndarray, r: Crop) -> None:
     """dst = src outside the box r (the four strips around it)."""
     h, w = dst.shape[:2]
@@ -333,13 +339,17 @@ class Renderer:
         self._full_b = np.empty((h, w, self.channels), np.uint8)
 
     # ------------------------------------------------------------------ public
-    def render(self, from_viseme: str, to_viseme: str, alpha: float, *, out: Optional[np.ndarray] = None
-               ) -> np.ndarray:
+    def render(self, from_viseme: str, to_viseme: str, alpha: float, *, out: Optional[np.ndarray] = None,
+               region: Optional[Crop] = None) -> np.ndarray:
         """The frame at ``alpha`` between two visemes, RGB ``uint8`` ``(H, W, 3)`` (RGBA
         ``(H, W, 4)`` for a bank with transparency).
 
         Without ``out`` the returned array is the renderer's own buffer, overwritten by the
-        next call: copy it to keep it.
+        next call: copy it to keep it. With ``region`` (a :class:`~lipsync.store.Crop`, flow
+        and splat methods, with ``out``) only the pixels inside it are made right (those
+        outside are left as they were, or rendered where the region's rows cross the moving
+        part): a caller that reads one box of the frame (the lower face composited onto a
+        plate) pays for little more than that box.
         """
         self._check(from_viseme, to_viseme, alpha)
         if out is not None and not out.flags.c_contiguous:
@@ -375,7 +385,16 @@ class Renderer:
             return frame
         pair = self._pair(from_viseme, to_viseme)
         r = pair.roi
-        if out is not None:
+        if region is not None and out is not None:
+            # the ROI's rows inside the region; its columns whole (the kernel renders rows
+            # across the tables' whole box)
+            r = _intersect(r, Crop(region.y0, region.y1, r.x0, r.x1))
+            inside = _intersect(r, region)
+            _copy_outside(frame[region.y0:region.y1, region.x0:region.x1],
+                          imgs[from_viseme][region.y0:region.y1, region.x0:region.x1],
+                          Crop(inside.y0 - region.y0, inside.y1 - region.y0, inside.x0 - region.x0,
+                               inside.x1 - region.x0) if not inside.empty else inside)
+        elif out is not None:
             _copy_outside(frame, imgs[from_viseme], r)  # outside the ROI both images are equal
         elif self._frame_pair != (from_viseme, to_viseme):
             _copy_outside(frame, imgs[from_viseme], r)
@@ -383,10 +402,13 @@ class Renderer:
         if r.empty:
             return frame
         if self.method == "flow":
-            self._flow_frame(pair, alpha, frame)
+            self._flow_frame(pair, alpha, frame, roi=r)
         else:
             buf_a, buf_b = self._splat_parts(pair, alpha)
-            self._blend(buf_a, buf_b, alpha, frame[r.y0:r.y1, r.x0:r.x1])
+            p = pair.roi
+            self._blend(buf_a[r.y0 - p.y0:r.y1 - p.y0, r.x0 - p.x0:r.x1 - p.x0],
+                        buf_b[r.y0 - p.y0:r.y1 - p.y0, r.x0 - p.x0:r.x1 - p.x0], alpha,
+                        frame[r.y0:r.y1, r.x0:r.x1])
         return frame
 
     def parts(self, from_viseme: str, to_viseme: str, alpha: float) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -521,11 +543,13 @@ class Renderer:
         return cache
 
     # ------------------------------------------------------------------ methods
-    def _flow_frame(self, p: _Pair, alpha: float, out: np.ndarray, out_b: Optional[np.ndarray] = None) -> None:
-        """Write the ROI of the frame (or, with ``out_b``, of both warped images) into ``out``."""
-        r = p.roi
-        band = self._bands_numba(p, alpha, out, out_b) if self.kernel == "numba" else \
-            self._bands_compiled(p, alpha, out, out_b)
+    def _flow_frame(self, p: _Pair, alpha: float, out: np.ndarray, out_b: Optional[np.ndarray] = None,
+                    roi: Optional[Crop] = None) -> None:
+        """Write the ROI of the frame (or, with ``out_b``, of both warped images) into ``out``
+        (``roi``: a part of the pair's ROI instead)."""
+        r = p.roi if roi is None else roi
+        band = self._bands_numba(p, alpha, out, out_b, r) if self.kernel == "numba" else \
+            self._bands_compiled(p, alpha, out, out_b, r)
         n = self.frame_threads if (r.y1 - r.y0) >= MIN_ROWS_PER_THREAD * 2 else 1
         if n <= 1:
             band(r.y0, r.y1)
@@ -535,7 +559,7 @@ class Renderer:
         for f in [self._band_pool().submit(band, edges[i], edges[i + 1]) for i in range(n)]:
             f.result()
 
-    def _bands_compiled(self, p: _Pair, alpha: float, out: np.ndarray, out_b: Optional[np.ndarray]):
+    def _bands_compiled(self, p: _Pair, alpha: float, out: np.ndarray, out_b: Optional[np.ndarray], r: Crop):
         """``band(y0, y1)`` rendering rows of the frame with the compiled kernel.
 
         The kernel sums the stored tables itself, one coarse row at a time as a band
@@ -544,7 +568,7 @@ class Renderer:
         ia, ib = p.inv_a, p.inv_b
         pa, pb = self._rgbx(p.a), self._rgbx(p.b)
         h, w = self.shape
-        bx, r = p.box, p.roi
+        bx = p.box
         side_a = _table_args(ia, alpha)
         side_b = _table_args(ib, 1.0 - alpha)
         geometry = (w, h, pa.shape[1], ia.data.shape[1], ia.coarse_width, ia.data.shape[2], int(ia.half),
@@ -560,7 +584,7 @@ class Renderer:
                                        y0, y1, r.x0, r.x1, *side_a, *side_b, wa, level, nch)
         return band
 
-    def _bands_numba(self, p: _Pair, alpha: float, out: np.ndarray, out_b: Optional[np.ndarray]):
+    def _bands_numba(self, p: _Pair, alpha: float, out: np.ndarray, out_b: Optional[np.ndarray], r: Crop):
         """``band(y0, y1)`` rendering rows of the frame with the numba kernel."""
         ia, ib = p.inv_a, p.inv_b
         hc = ia.data.shape[1]
@@ -569,7 +593,7 @@ class Renderer:
             _fill_coarse(ia, alpha, da)
             _fill_coarse(ib, 1.0 - alpha, db)
         pa, pb = self._packed(p.a), self._packed(p.b)
-        bx, r = p.box, p.roi
+        bx = p.box
         box = (bx.y0, bx.x0, bx.y1 - bx.y0, bx.x1 - bx.x0, ia.step)
         jobs = [(int(round((1.0 - alpha) * _BLEND_ONE)), out)] if out_b is None else \
             [(_BLEND_ONE, out), (0, out_b)]  # the two warped images alone: all weight on one side

@@ -24,7 +24,8 @@ The script crops the webcam (``--crop W:H:X:Y``, ffmpeg's order), makes a bank w
 decoded frames and prints: the bank's timing and warnings, each picture's lip opening, the
 rendered mouth's opening inside and outside the words and on P/B/M frames, and how still
 the rendered head is (eye-centre drift and per-frame steps, in eye distances) next to the
-GRID bank's render of the same speech.
+GRID bank's render of the same speech. Then (issue 28) ``lipsync dub`` re-voices the clip
+itself with the same speech and the same figures are printed for the dub.
 """
 
 from __future__ import annotations
@@ -55,13 +56,16 @@ def _render_stats(video: Path, bank_dir: Path) -> dict:
     from lipsync.face.video import read_video
     from lipsync.phonemes import DEFAULT_MAP, load_map
 
+    from lipsync.face.video import probe_video
+
+    fps = probe_video(video).fps  # a dub keeps the clip's own rate
     frames = list(read_video(video))
-    points = track_frames(frames, fps=25, smooth=False).points
+    points = track_frames(frames, fps=fps, smooth=False).points
     opening = M.lip_opening(points)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         anim = Animator.from_audio(Bank.load(bank_dir), ROOT / "samples" / "hello.wav",
-                                   (ROOT / "samples" / "hello.lab").read_text())
+                                   (ROOT / "samples" / "hello.lab").read_text(), fps=fps)
     speech = np.zeros(len(frames), bool)
     for w in anim.alignment.words:
         speech[int(w.start * anim.fps):int(np.ceil(w.end * anim.fps))] = True
@@ -111,6 +115,15 @@ def main(argv=None) -> int:
             _run([*lipsync, "render", str(ROOT / "samples" / "hello.wav"), "--text", str(ROOT / "samples" / "hello.lab"),
                   "--bank", str(b), "-o", str(out), "-q"])
             print(f"hello.wav rendered with {name}:", _render_stats(out, b))
+        # issue 28: the clip itself re-voiced with hello.wav (its own frames, its bank made by dub)
+        out = tmp / "dub.mp4"
+        proc = subprocess.run([*lipsync, "dub", str(clip), "--audio", str(ROOT / "samples" / "hello.wav"), "--text",
+                               str(ROOT / "samples" / "hello.lab"), "-o", str(out), "--cache", str(tmp / "cache")],
+                              capture_output=True, text=True)
+        said = [line for line in proc.stderr.splitlines() if "warning" in line or "error" in line or "wrote" in line]
+        print("lipsync dub (exit", proc.returncode, "):", " | ".join(said)[:600])
+        if proc.returncode == 0:
+            print("hello.wav dubbed onto the clip:", _render_stats(out, bank))
     return 0
 
 

@@ -82,6 +82,9 @@ def pack_bank(folder) -> BankPack:
         rel = str(PurePosixPath(os.path.normpath(data["visemes"][v]["image"]).replace(os.sep, "/")))
         if rel not in rels:
             rels.append(rel)
+    if bank.plate is not None:  # the idle plate of a bank made from video: a worker renders on it too
+        rels += [str(PurePosixPath(os.path.normpath(data["plate"][k]).replace(os.sep, "/")))
+                 for k in ("video", "poses", "mask")]
     files = tuple((rel, (folder / rel).read_bytes()) for rel in rels)
     return BankPack(digest=_digest(files), name=bank.name, names=bank.names, files=files)
 

@@ -23,6 +23,7 @@ EXIT_TERMINATED = 143
 # order a user meets them: make video, inspect timing, prepare a subject, then services.
 _COMMAND_MODULES = [
     "render",
+    "dub",
     "align",
     "cues",
     "atlas",

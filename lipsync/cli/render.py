@@ -44,6 +44,9 @@ def add_parser(sub) -> None:
     g.add_argument("--at", default=None, metavar="X,Y", help="body pixel where the mouth image's centre goes")
     g.add_argument("--scale", type=float, default=None, metavar="S", help="mouth size on the body (default: 1)")
     g.add_argument("--mouth-only", action="store_true", help="ignore bank.yaml's composite: render the mouth alone")
+    g.add_argument("--still", action="store_true",
+                   help="a bank made from video: show its still pictures instead of compositing the mouth onto "
+                        "its idle plate (the speaker's own video: blinks, head motion)")
     p.add_argument("--crf", type=int, default=DEFAULT_CRF, help=f"H.264 quality, lower is better (default: {DEFAULT_CRF})")
     p.add_argument("--preset", default=DEFAULT_PRESET,
                    help=f"x264 speed preset: x264's (ultrafast ... veryslow) or talking-head (default: {DEFAULT_PRESET})")
@@ -88,7 +91,8 @@ def run(args: argparse.Namespace) -> int:
     report = render_clip(timeline, args.output, bank=bank, audio=audio, fps=args.fps, live=live,
                          map=args.map, method=args.method, timing=args.timing, format=args.format,
                          crf=args.crf, preset=args.preset, store=args.store, jobs=args.jobs,
-                         quiet=args.quiet, timeline_options=args, background=background, composite=composite)
+                         quiet=args.quiet, timeline_options=args, background=background, composite=composite,
+                         still=args.still)
     if not args.quiet:
         print(report.summary(), file=sys.stderr)
     return 0

@@ -4,6 +4,9 @@
   or as it is (bank.yaml ``composite:``, ``lipsync render --over``).
 * :mod:`lipsync.composite.face` -- one face: a lower face (mouth, jaw, chin) pasted onto a
   plate picture (the lower-face mask, the pose and colour match, the blend).
+* :mod:`lipsync.composite.plate` -- the morphed lower face onto frames of real video, per
+  frame and ROI-only: a bank's idle plate (``lipsync render``) and the video being re-voiced
+  (``lipsync dub``, :mod:`lipsync.dubbing`).
 
 The names below are the ones ``lipsync.composite`` has always had.
 """

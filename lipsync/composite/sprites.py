@@ -34,14 +34,14 @@ Examples
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
-from pathlib import Path
-from typing import Optional, Sequence, Tuple, Union
+from typing import Optional, Tuple, Union
 
 import cv2
 import numpy as np
 
 from ..alpha import flatten, has_alpha, over, resize_rgba
+# defined beside bank.yaml's composite: key (the bank room sits below this one)
+from ..bank import MAX_SCALE, Composite, check_placement
 from ..errors import InputError
 
 __all__ = ["Composite", "Compositor", "DEFAULT_BACKGROUND", "MAX_SCALE", "parse_at", "check_placement"]
@@ -50,57 +50,7 @@ __all__ = ["Composite", "Compositor", "DEFAULT_BACKGROUND", "MAX_SCALE", "parse_
 #: asked for: white, the paper colour most drawn characters are made on (and what a
 #: transparent PNG shows on in most viewers and web pages).
 DEFAULT_BACKGROUND = (255, 255, 255)
-#: Largest mouth scale on a body: beyond it a mouth sprite is a blur of its pixels.
-MAX_SCALE = 16.0
-
 Background = Union[None, Tuple[int, int, int], np.ndarray]
-
-
-@dataclass(frozen=True)
-class Composite:
-    """A body image and where the mouth goes on it.
-
-    Attributes
-    ----------
-    image : numpy.ndarray
-        The body, RGB ``(H, W, 3)`` or straight RGBA ``(H, W, 4)`` ``uint8``.
-    at : (float, float)
-        The body pixel the mouth image's centre lands on.
-    scale : float
-        The mouth's size on the body relative to the bank's images.
-    path : Path, optional
-        Where the body image came from (for messages).
-    """
-
-    image: np.ndarray
-    at: Tuple[float, float]
-    scale: float = 1.0
-    path: Optional[Path] = None
-
-    def replace(self, *, image=None, at=None, scale=None, path=None) -> "Composite":
-        return Composite(self.image if image is None else image, self.at if at is None else at,
-                         self.scale if scale is None else scale, self.path if path is None else path)
-
-
-def check_placement(body_shape: Sequence[int], at: Sequence[float], scale: float) -> Optional[str]:
-    """What is wrong with a mouth centre ``at`` and ``scale`` on a body of ``body_shape``, or None.
-
-    Examples
-    --------
-    >>> check_placement((100, 80), (10, 20), 1.0) is None
-    True
-    >>> check_placement((100, 80), (90, 20), 1.0)
-    'at [90, 20] lies outside the 80x100 body image'
-    """
-    h, w = body_shape[:2]
-    if len(at) != 2 or not all(isinstance(v, (int, float)) and math.isfinite(v) for v in at):
-        return f"at must be two finite numbers [x, y], got {list(at)}"
-    if not (isinstance(scale, (int, float)) and math.isfinite(scale) and 0 < scale <= MAX_SCALE):
-        return f"scale must be a number in (0, {MAX_SCALE:g}], got {scale}"
-    x, y = at
-    if not (-0.5 <= x <= w - 0.5 and -0.5 <= y <= h - 0.5):
-        return f"at [{x:g}, {y:g}] lies outside the {w}x{h} body image"
-    return None
 
 
 def parse_at(text: str) -> Tuple[float, float]:

@@ -107,8 +107,9 @@ class LiveClip(Animator):
     (:func:`live_specs`): what ``render_clip(..., live=...)`` renders."""
 
     def __init__(self, bank, audio, fps: float = DEFAULT_FPS, *, lookahead: Optional[float] = None, map=None,
-                 method: str = "flow", timing=None, store=None, quiet: bool = True):
+                 method: str = "flow", timing=None, store=None, quiet: bool = True, still: bool = False):
         self.bank = bank if isinstance(bank, Bank) else Bank.load(bank)
         self.specs = live_specs(audio, self.bank, fps=fps, lookahead=lookahead, map=map, timing=timing, quiet=quiet)
         self.fps = float(fps)
         self.renderer = Renderer(self.bank, method=method, store=store)
+        self._attach_plate(still)

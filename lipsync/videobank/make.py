@@ -133,7 +133,7 @@ def _what_to_record(visemes: Sequence[str], pmap) -> str:
 
 def make_bank(outdir: PathLike, videos: Sequence[PathLike], *, text: Optional[str] = None,
               texts: Optional[Mapping[PathLike, str]] = None, config: Optional[VideoBankConfig] = None,
-              **options) -> VideoBankResult:
+              tracks: Optional[Mapping[PathLike, object]] = None, **options) -> VideoBankResult:
     """Make a viseme bank of the speaker in ``videos`` (``lipsync init OUTDIR --video ...``).
 
     Parameters
@@ -150,6 +150,9 @@ def make_bank(outdir: PathLike, videos: Sequence[PathLike], *, text: Optional[st
     config : VideoBankConfig, optional
         The options; or give them as keywords (``map=``, ``size=``, ``force=``, ``quiet=``,
         ``jobs=``, ``flows=``).
+    tracks : mapping, optional
+        Video → its :class:`~lipsync.face.track.FaceTrack`, when the caller has tracked it
+        already (``lipsync dub`` has): not tracked again.
 
     Returns
     -------
@@ -198,7 +201,7 @@ def make_bank(outdir: PathLike, videos: Sequence[PathLike], *, text: Optional[st
             check_transcript(s.text, cfg.lang, path=s.text_from if s.text_from != "--text" else "--text")
     seconds["probe"] = time.perf_counter() - t0
 
-    footage = observe(sources, pmap, cfg, seconds)
+    footage = observe(sources, pmap, cfg, seconds, tracks=tracks)
     t = time.perf_counter()
     ranked = select.rank(_candidates(footage, pmap.silence),
                          [select.FrameMeasures.of(tr.points, tr.fps, reg.residual)
@@ -223,7 +226,8 @@ def _candidates(footage: Footage, rest: str) -> List[Candidate]:
     return out
 
 
-def observe(sources: List[Source], pmap, cfg: VideoBankConfig, seconds: Dict[str, float]) -> Footage:
+def observe(sources: List[Source], pmap, cfg: VideoBankConfig, seconds: Dict[str, float], *,
+            tracks: Optional[Mapping[PathLike, object]] = None) -> Footage:
     """Align each video's speech, refuse footage without a pause for the rest shape, track
     the face in every frame, and map every frame onto one reference pose."""
     from tqdm import tqdm
@@ -234,6 +238,7 @@ def observe(sources: List[Source], pmap, cfg: VideoBankConfig, seconds: Dict[str
     from .speech import transcribe
 
     names = ", ".join(s.name for s in sources)
+    known = {Path(os.fspath(k)).resolve(): v for k, v in (tracks or {}).items()}
     speeches, tracks = [], []
     mesh = FaceMesh()  # the models loaded once for every video
     # one bar over every video's frames: each is aligned (its sound) and then tracked
@@ -254,7 +259,9 @@ def observe(sources: List[Source], pmap, cfg: VideoBankConfig, seconds: Dict[str
         t = time.perf_counter()
         for s in sources:
             bar.set_postfix_str(s.name)
-            tracks.append(track_frames(read_video(s.path, info=s.info), fps=s.info.fps, size=s.info.size,
+            given = known.get(Path(s.path).resolve())
+            tracks.append(given if given is not None else
+                          track_frames(read_video(s.path, info=s.info), fps=s.info.fps, size=s.info.size,
                                        source=str(s.path), mesh=mesh, progress=bar.update))
         seconds["track"] = time.perf_counter() - t
     ref = stabilise.reference_pose([tr.points[tr.found] for tr in tracks])
@@ -439,6 +446,8 @@ def assemble(outdir: Path, footage: Footage, ranked: Dict[str, List[Candidate]],
             write.write_png(tmp / files[v], images[files[v]])
         text_yaml = write.bank_text(outdir.resolve().name, pmap.silence, files, features, symmetric=symmetric,
                                     header=header, timing=TIMING)
+        from .plate import write_plate
+        text_yaml += write_plate(tmp, footage, pictures.framing, pts, pmap.silence)  # the idle plate (issue 28)
         Bank.from_text(text_yaml, tmp, images=images)  # never write a bank that would not load
         write_bank_text(tmp / "bank.yaml", text_yaml)
         bank = Bank.load(tmp)

@@ -1,0 +1,478 @@
+"""``lipsync dub VIDEO --audio SPEECH``: a video of a speaker re-voiced by new speech.
+
+The video's own frames are the plate: its head motion, blinks, expressions and background
+stay; its lower face is replaced by the speaker's bank morphed to the new speech::
+
+    VIDEO --probe--> fps, size          SPEECH --probe--> samples (a file without sound: exit 2)
+    VIDEO --track (face mesh, cached)--> each frame's still points --> pose (bank -> frame)
+    bank (--bank, else made from VIDEO by lipsync init --video and cached)
+        --face mesh of its pictures--> lower-face mask (union over the visemes), still points
+    SPEECH (+ --text) --aligner--> phones --Animator (map, timing)--> one FrameSpec per frame
+    frame i: plate = VIDEO frame pingpong(i) (forwards, then backwards when the speech is
+        longer; cut when shorter) --PlateCompositor (morphed lower face, ROI only)-->
+        --> encoder (H.264 + the new speech as AAC) --> OUT (renamed into place)
+
+Frames where the tracker lost the face are written as they are, with one warning naming
+them (frame numbers and times). Caches live under the user's cache folder
+(``$XDG_CACHE_HOME/lipsync/dub``), one entry per video content (sha256 of its bytes): the
+face track and, per phoneme map, the bank made from it. An entry that does not load is a
+miss: removed and made again.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import shutil
+import threading
+import time
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+from typing import List, Optional, Tuple
+
+import numpy as np
+
+from .errors import InputError, PathLike
+from .composite.plate import PlateCompositor, colour_lut, pingpong, plate_colour
+
+__all__ = ["dub", "DubReport", "DubWarning", "cache_root", "lost_frames_text"]
+
+#: Cache format: bump when what an entry holds changes (older entries are then misses).
+CACHE_VERSION = 1
+#: Decoded plate frames kept for playing the video backwards (speech longer than the
+#: video) are held in a temporary file beside the output (``.OUT.partial-PID.plate-frames``)
+#: rather than in memory: a 30 s 720p video is 2 GB of RGB.
+_MEMMAP_SUFFIX = ".plate-frames"
+
+
+#: Output formats with a sound track (lipsync.encode): H.264 + AAC, VP9 + Opus, ProRes + PCM.
+SOUND_FORMATS = ("mp4", "webm", "mov")
+
+
+class DubWarning(UserWarning):
+    """Something the dub could not do everywhere (frames without a face, ...)."""
+
+
+@dataclass(frozen=True)
+class DubReport:
+    """What :func:`dub` made.
+
+    Attributes
+    ----------
+    output : str
+    frames : int
+        Frames written (the speech's length at the video's frame rate).
+    fps : float
+    size : (int, int)
+        ``(W, H)``, the video's.
+    video_frames : int
+        Frames of the input video (the plate).
+    lost : tuple of int
+        Output frames written as they were (no face in the plate frame).
+    bank : str
+        The bank used (a cached one when made from the video).
+    seconds : dict
+        Wall time per step.
+    """
+
+    output: str
+    frames: int
+    fps: float
+    size: Tuple[int, int]
+    video_frames: int
+    lost: Tuple[int, ...]
+    bank: str
+    seconds: dict
+
+    def summary(self) -> str:
+        w, h = self.size
+        total = sum(self.seconds.values())
+        steps = ", ".join(f"{k} {v:.1f}" for k, v in self.seconds.items())
+        return (f"wrote {self.output}: {self.frames} frames ({self.frames / self.fps:.2f} s at {self.fps:g} fps), "
+                f"{w}x{h}, over {self.video_frames} video frames; {total:.1f} s ({steps})")
+
+
+def cache_root() -> Path:
+    """Where dub caches live: ``$XDG_CACHE_HOME/lipsync/dub`` (``~/.cache/lipsync/dub``),
+    beside the flow stores of read-only banks (:meth:`lipsync.store.FlowStore.for_bank`)."""
+    base = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "lipsync"
+    return base / "dub"
+
+
+def _digest(path: Path) -> str:
+    h = hashlib.sha256(f"lipsync-dub-{CACHE_VERSION}".encode())
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()[:32]
+
+
+def lost_frames_text(lost, fps: float, limit: int = 8) -> str:
+    """``"3-5 (0.12-0.20 s), 9 (0.36 s)"``: runs of frame numbers with their times.
+
+    Examples
+    --------
+    >>> lost_frames_text([3, 4, 5, 9], 25.0)
+    '3-5 (0.12-0.20 s), 9 (0.36 s)'
+    """
+    idx = sorted(int(i) for i in lost)
+    runs: List[List[int]] = []
+    for i in idx:
+        if runs and i == runs[-1][1] + 1:
+            runs[-1][1] = i
+        else:
+            runs.append([i, i])
+    parts = [f"{a} ({a / fps:.2f} s)" if a == b else f"{a}-{b} ({a / fps:.2f}-{b / fps:.2f} s)"
+             for a, b in runs[:limit]]
+    return ", ".join(parts) + (", ..." if len(runs) > limit else "")
+
+
+# --------------------------------------------------------------------------- caches
+
+def _load_track(path: Path):
+    from .face.track import FaceTrack
+
+    with np.load(path, allow_pickle=False) as z:
+        points, found = z["points"], z["found"]
+        fps, size = float(z["fps"]), tuple(int(v) for v in z["size"])
+    if points.ndim != 3 or points.shape[1:] != (468, 3) or found.shape != (len(points),):
+        raise ValueError("bad track arrays")
+    return FaceTrack(points=points, raw=points, found=found.astype(bool), fps=fps, size=size, source=str(path))
+
+
+def _save_track(path: Path, track) -> None:
+    from ._files import atomic_write_bytes
+
+    def write(f):
+        np.savez(f, points=track.points, found=track.found, fps=np.float64(track.fps),
+                 size=np.array(track.size, np.int64))
+
+    atomic_write_bytes(path, write)
+
+
+def video_track(video: Path, info, *, entry: Optional[Path], quiet: bool, mesh=None):
+    """The face track of every frame of ``video`` (from the cache entry when it loads)."""
+    from .face.track import track_frames
+    from .face.video import read_video
+    from tqdm import tqdm
+
+    cached = entry / "track.npz" if entry is not None else None
+    if cached is not None and cached.is_file():
+        try:
+            return _load_track(cached)
+        except Exception:  # a damaged entry is a miss
+            cached.unlink(missing_ok=True)
+    with tqdm(total=info.frame_count or None, desc="face", unit="frame", disable=quiet, leave=False) as bar:
+        with warnings.catch_warnings():
+            # the lost frames are named once, by dub, in output frames
+            from .face.landmarks import FaceWarning
+
+            warnings.simplefilter("ignore", FaceWarning)
+            track = track_frames(read_video(video, info=info), fps=info.fps, size=info.size, source=str(video),
+                                 mesh=mesh, progress=bar.update)
+    if cached is not None:
+        try:
+            cached.parent.mkdir(parents=True, exist_ok=True)
+            _save_track(cached, track)
+        except OSError:
+            pass  # a cache that cannot be written costs time, not the result
+    return track
+
+
+def bank_from_video(video: Path, *, entry: Path, map=None, text: Optional[str] = None, jobs=None,
+                    quiet: bool = True, track=None):
+    """The bank ``lipsync init OUT --video VIDEO [--text TEXT]`` makes, cached in ``entry``
+    (one per map and transcript)."""
+    from .bank import Bank
+    from .videobank import make_bank
+
+    key = hashlib.sha256(repr((os.fspath(map) if map is not None else None, text)).encode()).hexdigest()[:12]
+    folder = entry / f"bank-{key}"
+    if (folder / "bank.yaml").is_file():
+        try:
+            return Bank.load(folder)
+        except Exception:  # a broken entry is a miss
+            shutil.rmtree(folder, ignore_errors=True)
+    folder.parent.mkdir(parents=True, exist_ok=True)
+    options = {"map": os.fspath(map)} if map is not None else {}
+    make_bank(folder, [video], text=text, force=True, quiet=quiet, jobs=jobs,
+              tracks={video: track} if track is not None else None, **options)
+    return Bank.load(folder)
+
+
+# --------------------------------------------------------------------------- the bank's face
+
+def bank_face(bank, *, mesh=None):
+    """The lower-face mask of a bank of a real face (float32, bank pixels: the union over its
+    visemes' face lines, :func:`lipsync.composite.face.mask_from_lines`) and the rest
+    picture's face mesh (``(468, 3)``, what each video frame's pose is fitted to)."""
+    from .face.track import Tracker
+    from .composite.face import mask_from_lines
+
+    from .face.landmarks import FaceMesh
+
+    pts = Tracker(mesh or FaceMesh(), source=f"{bank.path} {bank.rest}").step(
+        np.ascontiguousarray(bank.images[bank.rest][..., :3]))
+    if pts is None:
+        raise InputError(f"no face found in the rest picture ({bank.rest}): dub needs a bank of a real face "
+                         f"(lipsync init --video)", path=bank.yaml_path)
+    try:
+        mask = mask_from_lines([bank.features[v] for v in bank.names], bank.shape)
+    except (KeyError, ValueError):
+        from .composite.face import mask_from_mesh
+
+        mask = mask_from_mesh([pts], bank.shape)  # a bank whose lines are not a face template's
+    return mask, pts
+
+
+def plate_poses(bank_mesh: np.ndarray, track) -> np.ndarray:
+    """2x3 matrices ``(N, 2, 3)`` taking bank pixels to each video frame's pixels
+    (:func:`lipsync.composite.face.pose_onto`; NaN where the face was lost)."""
+    from .composite.face import pose_onto
+
+    out = np.full((len(track), 2, 3), np.nan)
+    for i in np.nonzero(track.found)[0]:
+        out[i] = pose_onto(bank_mesh, track.points[i])
+    return out
+
+
+def colour_table(bank, video: Path, track, poses: np.ndarray, bank_mesh: np.ndarray, mask: np.ndarray):
+    """The colour table (or None: the colours agree) taking the bank's rest picture to the
+    video's colour (:func:`~lipsync.composite.plate.plate_colour` over frames spread through
+    the video)."""
+    from .videobank.cut import grab_frames
+    from .composite.plate import COLOUR_SAMPLES
+
+    found = np.nonzero(track.found)[0]
+    frames = sorted({int(found[int(k)]) for k in np.linspace(0, found.size - 1, min(COLOUR_SAMPLES, found.size))})
+    got = grab_frames(video, frames)
+    gains = plate_colour(bank.images[bank.rest], bank_mesh, mask, [got[f] for f in frames], [poses[f] for f in frames])
+    # a bank made from this video has its colour already: no table to apply every frame
+    return None if np.abs(gains - 1.0).max() * 255 < 0.5 else colour_lut(gains)
+
+
+# --------------------------------------------------------------------------- plate frames
+
+class _PlateReader:
+    """The video's frames by index for render threads: decoded once, in order; kept in a
+    temporary file only when the speech outlasts the video (played backwards)."""
+
+    def __init__(self, video: Path, info, *, keep: bool, output: Path):
+        from .face.video import read_video
+
+        self._gen = read_video(video, info=info)
+        self._lock = threading.Lock()
+        self._next = 0
+        self._recent = {}
+        self._shape = (info.size[1], info.size[0], 3)
+        self._store = None
+        self._path = None
+        self._keep = keep
+        self._output = output
+
+    def _grow_store(self, n: int):
+        if self._store is None:
+            from ._files import partial_name
+
+            # beside the output, named as its partials are: a killed run's is removed by the
+            # next write of the output (lipsync._files.remove_stale_partials)
+            self._path = self._output.parent / partial_name(self._output, _MEMMAP_SUFFIX)
+            self._path.touch()
+            self._cap = 0
+        if n > self._cap:
+            cap = max(n, 2 * self._cap, 64)
+            with open(self._path, "r+b") as f:
+                f.truncate(cap * int(np.prod(self._shape)))
+            self._store = np.memmap(self._path, np.uint8, "r+", shape=(cap,) + self._shape)
+            self._cap = cap
+
+    def get(self, j: int) -> np.ndarray:
+        with self._lock:
+            if j < self._next:
+                if j in self._recent:
+                    return self._recent.pop(j)
+                return self._store[j]
+            while self._next <= j:
+                frame = next(self._gen)
+                if self._keep:
+                    self._grow_store(self._next + 1)
+                    self._store[self._next] = frame
+                self._recent[self._next] = frame
+                self._next += 1
+            # frames asked for once, in order (render threads run a few frames apart)
+            for k in [k for k in self._recent if k < j - 64]:
+                del self._recent[k]
+            return self._recent.pop(j)
+
+    def close(self):
+        self._gen.close()
+        self._store = None
+        if self._path is not None:
+            self._path.unlink(missing_ok=True)
+
+
+# --------------------------------------------------------------------------- the pipeline
+
+def dub(video: PathLike, audio: PathLike, output: PathLike, *, text: Optional[str] = None, bank=None,
+        video_text: Optional[str] = None, map=None, timing=None, crf: int = 18, preset: Optional[str] = None,
+        store=None, jobs: Optional[int] = None, quiet: bool = False, cache: Optional[PathLike] = None) -> DubReport:
+    """Re-voice ``video`` with the speech in ``audio`` (``lipsync dub``).
+
+    Parameters
+    ----------
+    video : path-like
+        A video of one speaker facing the camera (any container ffmpeg reads).
+    audio : path-like
+        The new speech (any file with an audio stream ffmpeg reads; a video's sound too).
+    output : path-like
+        The video to write (.mp4); written under a temporary name and renamed when complete.
+    text : str, optional
+        The new speech's transcript (or a file holding it); else its words are recognised.
+    bank : Bank or path-like, optional
+        The speaker's bank; default: one made from ``video`` itself
+        (:func:`lipsync.videobank.make_bank`, cached).
+    video_text : str, optional
+        What is said in ``video`` (for making its bank; else ``NAME.txt``/``NAME.lab``
+        beside it, else recognised).
+    map, timing
+        As for :class:`lipsync.Animator` (the bank's timing by default).
+    crf, preset
+        x264 quality and preset (default: :data:`lipsync.clip.DEFAULT_PRESET`).
+    store : FlowStore or path-like, optional
+        Flow store (default: the bank's own).
+    jobs : int, optional
+        Processes for computing flows.
+    quiet : bool
+        No progress bars.
+    cache : path-like, optional
+        Cache folder (default :func:`cache_root`).
+
+    Returns
+    -------
+    DubReport
+
+    Raises
+    ------
+    lipsync.errors.InputError
+        ``video`` is missing or not a video, or shows no face; ``audio`` is missing or has
+        no sound (the message names the file).
+
+    Examples
+    --------
+    >>> dub("missing.mp4", "speech.wav", "out.mp4")
+    Traceback (most recent call last):
+    ...
+    lipsync.errors.InputError: missing.mp4: no such file
+
+    With the GRID clips in ``tests/data/grid-s1`` (a bank is made from the first clip and
+    cached; about 15 s on two cores the first time)::
+
+        from lipsync import dub
+        from lipsync.bench.grid import grid_dir, transcript
+        d = grid_dir()
+        print(dub(d / "bbwm5s.mpg", d / "prap6p.mpg", "dubbed.mp4", text=transcript("prap6p")).summary())
+    """
+    from tqdm import tqdm
+
+    from .animator import Animator
+    from .bank import Bank
+    from .clip import DEFAULT_PRESET, SINGLE_ENCODER_THREAD_CORES, render_parallel
+    from .encode import format_for, open_writer
+    from .encode.mp4 import check_preset
+    from .face.landmarks import FaceMesh
+    from .face.video import probe_video
+    from .speech.audio import load_audio
+    from .store import FlowStore
+
+    seconds = {}
+    t = time.perf_counter()
+    preset = preset or DEFAULT_PRESET
+    check_preset(preset)
+    if not 0 <= crf <= 51:
+        raise InputError(f"--crf must be 0..51, got {crf}")
+    video, audio, output = Path(os.fspath(video)), Path(os.fspath(audio)), Path(os.fspath(output))
+    out_format = format_for(output)
+    if out_format not in SOUND_FORMATS:
+        raise InputError(f"a dub is a video with sound: write {', '.join('.' + f for f in SOUND_FORMATS)} "
+                         f"(got {out_format})", path=output)
+    info = probe_video(video)
+    samples = load_audio(audio)  # AudioError (an InputError) naming a file without sound
+    if samples.size == 0:
+        raise InputError("has no sound to dub with (0 samples)", path=audio)
+    entry = Path(os.fspath(cache)) if cache is not None else cache_root()
+    entry = entry / _digest(video)
+    seconds["probe"] = time.perf_counter() - t
+
+    t = time.perf_counter()
+    mesh = FaceMesh()
+    track = video_track(video, info, entry=entry, quiet=quiet, mesh=mesh)
+    seconds["track"] = time.perf_counter() - t
+
+    t = time.perf_counter()
+    if bank is None:
+        bank = bank_from_video(video, entry=entry, map=map, text=video_text, jobs=jobs, quiet=quiet, track=track)
+    elif not isinstance(bank, Bank):
+        bank = Bank.load(bank)
+    seconds["bank"] = time.perf_counter() - t
+
+    t = time.perf_counter()
+    mask, bank_mesh = bank_face(bank, mesh=mesh)
+    poses = plate_poses(bank_mesh, track)
+    compositor = PlateCompositor(mask, lut=colour_table(bank, video, track, poses, bank_mesh, mask))
+    seconds["face"] = time.perf_counter() - t
+
+    t = time.perf_counter()
+    if not isinstance(store, FlowStore):
+        store = FlowStore.for_bank(bank, store)
+    anim = Animator.from_audio(bank, audio, text, fps=info.fps, map=map, timing=timing, store=store, still=True)
+    n = len(anim)
+    if n == 0:
+        raise InputError("the speech lasts 0 s: there is no frame to write", path=audio)
+    from .preprocess import all_pairs, preprocess
+
+    nb = anim.renderer.nb
+    if any(not store.pair_path(store.pair_key(bank, a, b, nb.axis)).exists() for a, b in all_pairs(bank.names)):
+        preprocess(bank, store=store, jobs=jobs, quiet=quiet, normalised=nb)
+    seconds["align"] = time.perf_counter() - t
+
+    t = time.perf_counter()
+    nv = len(track)
+    plate_of = [pingpong(i, nv) for i in range(n)]
+    lost = tuple(i for i in range(n) if not track.found[plate_of[i]])
+    if lost:
+        warnings.warn(f"{video}: no face in the video at output frame(s) {lost_frames_text(lost, info.fps)}; "
+                      f"those frames are written as they are", DubWarning, stacklevel=2)
+    anim.renderer.frame_threads = 1  # whole frames run in parallel instead
+    bank_shape = anim.renderer.shape + (anim.renderer.channels,)
+    scratch = threading.local()
+    output.parent.mkdir(parents=True, exist_ok=True)
+    reader = _PlateReader(video, info, keep=n > nv, output=output)
+    shape = (info.size[1], info.size[0], 3)
+    geometry = [compositor.geometry(p, shape) if found else None for p, found in zip(poses, track.found)]
+
+    def render_into(i: int, buf: np.ndarray) -> None:
+        j = plate_of[i]
+        np.copyto(buf, reader.get(j))
+        if not track.found[j]:
+            return
+        mouth = getattr(scratch, "frame", None)
+        if mouth is None:
+            mouth = scratch.frame = np.empty(bank_shape, np.uint8)
+        s = anim.specs[i]  # only the lower face's box of the morph is read: only that box is rendered
+        anim.renderer.render(s.from_viseme, s.to_viseme, s.alpha, out=mouth, region=compositor.region)
+        compositor.apply(mouth[..., :3], buf, poses[j], geometry[j])
+
+    w, h = info.size
+    encoder_threads = 1 if (os.cpu_count() or 1) <= SINGLE_ENCODER_THREAD_CORES else None
+    try:
+        with open_writer(output, fps=info.fps, size=(w, h), format=out_format, audio=audio, crf=crf, preset=preset,
+                         quiet=True, frames=n, threads=encoder_threads) as writer:
+            with tqdm(total=n, desc="dub", unit="frame", disable=quiet, leave=False) as bar:
+                render_parallel(render_into, n, (h, w, 3), writer.write_prepared, progress=lambda d: bar.update(1),
+                                prepare=writer.prepare)
+    finally:
+        reader.close()
+    seconds["render"] = time.perf_counter() - t
+    return DubReport(output=str(output), frames=n, fps=float(info.fps), size=(w, h), video_frames=nv, lost=lost,
+                     bank=str(bank.path), seconds=seconds)
