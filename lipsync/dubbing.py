@@ -196,8 +196,19 @@ def bank_from_video(video: Path, *, entry: Path, map=None, text: Optional[str] =
             shutil.rmtree(folder, ignore_errors=True)
     folder.parent.mkdir(parents=True, exist_ok=True)
     options = {"map": os.fspath(map)} if map is not None else {}
-    make_bank(folder, [video], text=text, force=True, quiet=quiet, jobs=jobs,
+    # Made under this process's own name, then renamed into place: two dubs of one video at
+    # once (a batch) must not replace a bank the other is reading. The first rename wins; a
+    # partial of a killed process is removed by the next dub (the render partials' rule).
+    from ._files import partial_name, remove_stale_partials
+
+    remove_stale_partials(folder)
+    mine = folder.parent / partial_name(folder)
+    make_bank(mine, [video], text=text, force=True, quiet=quiet, jobs=jobs,
               tracks={video: track} if track is not None else None, **options)
+    try:
+        os.rename(mine, folder)
+    except OSError:  # another process's bank got there first: the same bank, keep that one
+        shutil.rmtree(mine, ignore_errors=True)
     return Bank.load(folder)
 
 

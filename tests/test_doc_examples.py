@@ -50,6 +50,9 @@ FIXTURES = {
     "face.jpg": "tests/data/faces/astronaut.jpg",
     "speaker.mp4": "tests/data/grid-s1/bbwm5s.mpg",
     "french.TextGrid": "tests/data/phonetics/french_mfa_ipa.TextGrid",
+    "french.ogg": "tests/data/languages/fleurs-fr-004.ogg", "french.txt": "tests/data/languages/fleurs-fr-004.txt",
+    "talk.mp4": "tests/data/grid-s1/bbwm5s.mpg", "new-speech.wav": "samples/balloons.wav",
+    "new-speech.txt": "samples/balloons.lab",
 }
 #: Made from samples/hello.wav by the bundled ffmpeg (the pages show other containers).
 CONVERTED = ("speech.mp3", "speech.m4a", "speech.flac")
@@ -128,6 +131,11 @@ def sandbox(tmp_path_factory, installed):
     shutil.copytree(ROOT / "samples", d / "samples")
     for name, src in FIXTURES.items():
         shutil.copy(ROOT / src, d / name)
+    # a page's YAML file example (a block starting "# NAME.yaml") is the file its commands use
+    for _, _, lang, code, _ in doc_blocks():
+        first = code.split("\n", 1)[0]
+        if lang == "yaml" and first.startswith("# ") and first.endswith(".yaml") and "/" not in first:
+            (d / first[2:]).write_text(code, encoding="utf-8")
     for name in CONVERTED:
         subprocess.run([imageio_ffmpeg.get_ffmpeg_exe(), "-loglevel", "error", "-i", str(ROOT / "samples/hello.wav"),
                         str(d / name)], check=True)
