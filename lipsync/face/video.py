@@ -59,11 +59,18 @@ def _reader(path: Path, **kwargs):
 
     if not path.is_file():
         raise InputError("no such file" if not path.exists() else "not a file", path=path)
-    gen = imageio_ffmpeg.read_frames(str(path), pix_fmt="rgb24", **kwargs)
+    from .._media import REFUSED_TEXT, input_args, refused
+
+    # only as a media container, never a playlist or list pointing at other files (lipsync._media)
+    *params, _, url = input_args(path)
+    gen = imageio_ffmpeg.read_frames(url, pix_fmt="rgb24", input_params=params + kwargs.pop("input_params", []),
+                                     **kwargs)
     try:
         meta = next(gen)
     except (OSError, RuntimeError, StopIteration) as e:
         gen.close()
+        if refused(str(e)):
+            raise InputError(REFUSED_TEXT, path=path) from None
         text = str(e).strip().splitlines()
         raise InputError("not a video ffmpeg can read" + (f" ({text[-1]})" if text else ""), path=path) from None
     return gen, meta

@@ -89,7 +89,9 @@ def load_audio(path: PathLike, *, sample_rate: int = SAMPLE_RATE) -> np.ndarray:
         raise AudioError("no such file", path=name)
     if os.path.isdir(name):
         raise AudioError("is a folder, not an audio file", path=name)
-    cmd = [_ffmpeg_exe(), "-nostdin", "-v", "error", "-i", name, "-map", "0:a:0", "-vn", "-sn", "-dn",
+    from .._media import input_args, refused, REFUSED_TEXT
+
+    cmd = [_ffmpeg_exe(), "-nostdin", "-v", "error", *input_args(name), "-map", "0:a:0", "-vn", "-sn", "-dn",
            "-ac", "1", "-ar", str(int(sample_rate)), "-f", "s16le", "-acodec", "pcm_s16le", "-"]
     try:
         proc = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, check=False)
@@ -100,6 +102,8 @@ def load_audio(path: PathLike, *, sample_rate: int = SAMPLE_RATE) -> np.ndarray:
         said = full[-_STDERR_TAIL:].splitlines()[-1] if full else f"ffmpeg exit status {proc.returncode}"
         if "matches no streams" in full:  # a video without sound, an image, ...
             said = "no audio stream"
+        if refused(full):  # a playlist, a concat list, ...: see lipsync._media
+            raise AudioError(REFUSED_TEXT, path=name)
         raise AudioError(f"cannot read as audio ({said})", path=name)
     data = proc.stdout
     return np.frombuffer(data[: len(data) // 2 * 2], dtype="<i2").astype(np.int16, copy=False)
