@@ -165,10 +165,10 @@ def make_bank(outdir: PathLike, videos: Sequence[PathLike], *, text: Optional[st
     >>> import tempfile, pathlib
     >>> out = pathlib.Path(tempfile.mkdtemp())
     >>> _ = (out / "notes.txt").write_text("mine")
-    >>> make_bank(out, ["talk.mp4"])      # checked before any work is done
+    >>> make_bank(out, ["talk.mp4"], force=True)      # checked before any work is done
     Traceback (most recent call last):
     ...
-    lipsync.errors.InputError: ...: is not empty; use --force to replace what is there with the new bank
+    lipsync.errors.InputError: ...: is not empty and is not a bank (no bank.yaml); --force replaces only a bank: give a new or empty folder
 
     With the three GRID clips in ``tests/data/grid-s1`` (about 10 s on two cores)::
 
@@ -185,7 +185,9 @@ def make_bank(outdir: PathLike, videos: Sequence[PathLike], *, text: Optional[st
     from ..phonemes import load_map
     from .sources import find_sources
 
-    write.check_outdir(outdir, cfg.force)
+    inputs = _inputs(videos, text)
+    write.check_outdir(outdir, cfg.force, inputs)
+    write.check_writable(outdir)
     seconds: Dict[str, float] = {}
     t0 = time.perf_counter()
     pmap = load_map(cfg.map)
@@ -204,7 +206,12 @@ def make_bank(outdir: PathLike, videos: Sequence[PathLike], *, text: Optional[st
     t = time.perf_counter()
     pictures = cut_and_choose(footage, {v: r[:select.FINALISTS] for v, r in ranked.items()}, cfg)
     seconds["cut"] = time.perf_counter() - t
-    return assemble(outdir, footage, ranked, pictures, pmap, cfg, seconds)
+    return assemble(outdir, footage, ranked, pictures, pmap, cfg, seconds, inputs=inputs)
+
+
+def _inputs(videos: Sequence[PathLike], text: Optional[str]) -> List[PathLike]:
+    """The files a bank is made from (the bank's folder may not hold them)."""
+    return list(videos) + ([text] if text is not None and os.path.isfile(text) else [])
 
 
 def _candidates(footage: Footage, rest: str) -> List[Candidate]:
@@ -306,7 +313,7 @@ def cut_and_choose(footage: Footage, finalists: Dict[str, List[Candidate]], cfg:
 
 
 def assemble(outdir: Path, footage: Footage, ranked: Dict[str, List[Candidate]], pictures: Pictures, pmap,
-             cfg: VideoBankConfig, seconds: Dict[str, float]) -> VideoBankResult:
+             cfg: VideoBankConfig, seconds: Dict[str, float], inputs: Sequence[PathLike] = ()) -> VideoBankResult:
     """Borrow shapes for visemes never shown, match the colour, place the lines, and write
     the bank (PNGs, bank.yaml, report, preview, flows) all at once."""
     from ..bank import Bank
@@ -373,7 +380,7 @@ def assemble(outdir: Path, footage: Footage, ranked: Dict[str, List[Candidate]],
 
     header = [f"# Written by lipsync init --video from {len(footage.sources)} video(s) ({names[:200]}): one "
               f"frame per viseme, lines placed from the face; the choice is in {write.REPORT_NAME}."]
-    with write.Staging(outdir, force=cfg.force) as tmp:
+    with write.Staging(outdir, force=cfg.force, inputs=inputs) as tmp:
         t = time.perf_counter()
         images = {}
         for v in order:
