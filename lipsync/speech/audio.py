@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import os
 import subprocess
-from typing import Union
+from typing import Optional, Union
 
 import numpy as np
 
@@ -54,7 +54,7 @@ def _ffmpeg_exe() -> str:
     return imageio_ffmpeg.get_ffmpeg_exe()
 
 
-def load_audio(path: PathLike, *, sample_rate: int = SAMPLE_RATE) -> np.ndarray:
+def load_audio(path: PathLike, *, sample_rate: int = SAMPLE_RATE, max_seconds: Optional[float] = None) -> np.ndarray:
     """Decode an audio file to mono 16-bit samples at ``sample_rate``.
 
     Parameters
@@ -63,6 +63,8 @@ def load_audio(path: PathLike, *, sample_rate: int = SAMPLE_RATE) -> np.ndarray:
         Any file ffmpeg can read an audio stream from.
     sample_rate : int
         Output rate in Hz (default 16000, the acoustic model's rate).
+    max_seconds : float, optional
+        Decode no further than this (a server checking an upload's length).
 
     Returns
     -------
@@ -92,7 +94,8 @@ def load_audio(path: PathLike, *, sample_rate: int = SAMPLE_RATE) -> np.ndarray:
     from .._media import input_args, refused, REFUSED_TEXT
 
     cmd = [_ffmpeg_exe(), "-nostdin", "-v", "error", *input_args(name), "-map", "0:a:0", "-vn", "-sn", "-dn",
-           "-ac", "1", "-ar", str(int(sample_rate)), "-f", "s16le", "-acodec", "pcm_s16le", "-"]
+           "-ac", "1", "-ar", str(int(sample_rate)), "-f", "s16le", "-acodec", "pcm_s16le"]
+    cmd += ["-t", f"{float(max_seconds):.3f}", "-"] if max_seconds is not None else ["-"]
     try:
         proc = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, check=False)
     except OSError as exc:  # ffmpeg itself not runnable: the environment, not the file
