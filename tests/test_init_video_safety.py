@@ -128,3 +128,90 @@ def test_disk_errors_while_staging_name_out_not_the_hidden_folder(tmp_path, code
             raise OSError(code_, os.strerror(code_), str(tmp / "C.png"))
     assert str(caught.value) == f"{out}: cannot write the bank: {words} (nothing was written)"
     assert list(tmp_path.iterdir()) == []
+
+
+# ---------------------------------------------------------------- item 2: rotation
+
+FFMPEG = None
+
+
+def _ffmpeg(*args):
+    import imageio_ffmpeg
+
+    subprocess.run([imageio_ffmpeg.get_ffmpeg_exe(), "-v", "error", "-y", *map(str, args)], check=True)
+
+
+@pytest.fixture(scope="module")
+def turned(tmp_path_factory):
+    """The GRID clip re-encoded, then tagged (stream copy) with display rotations, and a
+    phone-style one: pixels stored sideways, the tag turning them upright."""
+    d = tmp_path_factory.mktemp("turned")
+    _ffmpeg("-i", CLIP, "-c:v", "libx264", "-preset", "ultrafast", "-qp", "0", "-c:a", "aac", d / "upright.mp4")
+    for deg in (90, 180):
+        _ffmpeg("-display_rotation", deg, "-i", d / "upright.mp4", "-c", "copy", d / f"rot{deg}.mp4")
+    _ffmpeg("-i", d / "upright.mp4", "-vf", "transpose=2", "-c:v", "libx264", "-preset", "ultrafast", "-qp", "0",
+            "-c:a", "copy", d / "sideways.mp4")
+    _ffmpeg("-display_rotation", -90, "-i", d / "sideways.mp4", "-c", "copy", d / "phone.mp4")
+    for name in ("rot90", "rot180", "phone", "upright"):
+        (d / f"{name}.txt").write_text("bin blue with m five soon\n")
+    return d
+
+
+@pytest.mark.parametrize("name, turns", [("upright", 0), ("rot90", 3), ("rot180", 2), ("phone", 0)])
+def test_the_face_is_found_upright_whatever_the_rotation_tag(turned, name, turns):
+    import warnings
+
+    import numpy as np
+
+    from lipsync.face.video import probe_video, read_video
+    from lipsync.videobank.sources import find_upright
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        info = find_upright(turned / f"{name}.mp4", probe_video(turned / f"{name}.mp4"))
+    assert info.turns == turns and info.size == (360, 288)
+    assert bool(turns) == any("turned upright" in str(w.message) for w in caught)
+    # lossless streams: the turned frames are the upright clip's own pixels
+    want = [f for i, f in zip(range(3), read_video(turned / "upright.mp4"))]
+    got = [f for i, f in zip(range(3), read_video(turned / f"{name}.mp4", info=info))]
+    tol = 0 if name != "phone" else 3   # phone: transposed and re-encoded in 4:2:0 (chroma resampled)
+    assert all(np.abs(a.astype(int) - b).max() <= tol for a, b in zip(want, got))
+
+
+def test_init_video_of_a_sideways_tagged_clip_makes_an_upright_bank(turned, tmp_path, capsys, caplog):
+    from lipsync.bank import Bank
+    from lipsync.face.landmarks import FaceMesh
+
+    out = tmp_path / "me"
+    with pytest.warns(UserWarning, match="turned 90 degrees counterclockwise"):
+        code, err = _exit(["init", out, "--video", turned / "rot90.mp4", "--quiet"], capsys)
+    assert code == 0, err
+    assert not any("frame size for reading" in r.getMessage() for r in caplog.records)  # imageio's note hidden
+    bank = Bank.load(out)
+    pts = FaceMesh().find(bank.images["X"])
+    eyes_y, mouth_y = pts[[33, 263], 1].mean(), pts[[13, 14], 1].mean()
+    assert eyes_y < mouth_y - 20   # upright: the eyes well above the mouth
+    lip = bank.features["X"]["lip_inner_lower_l"].points
+    assert abs(lip[-1][0] - pts[14, 0]) < 3 and abs(lip[-1][1] - pts[14, 1]) < 3   # the line is on the lip
+
+
+def test_jpeg_exif_orientation_is_honoured(tmp_path):
+    import struct
+
+    import cv2
+    import numpy as np
+
+    from lipsync.bank import read_image
+    from lipsync.face.video import read_video
+
+    frame = next(iter(read_video(CLIP)))
+    # stored turned a quarter counterclockwise, EXIF orientation 6 ("turn 90 clockwise to show")
+    ok, jpg = cv2.imencode(".jpg", cv2.cvtColor(np.ascontiguousarray(np.rot90(frame, 1)), cv2.COLOR_RGB2BGR),
+                           [cv2.IMWRITE_JPEG_QUALITY, 98])
+    tiff = b"MM\x00*\x00\x00\x00\x08" + struct.pack(">H", 1) + struct.pack(">HHIHH", 0x0112, 3, 1, 6, 0) + b"\0" * 4
+    app1 = b"\xff\xe1" + struct.pack(">H", 2 + 6 + len(tiff)) + b"Exif\x00\x00" + tiff
+    path = tmp_path / "X.jpg"
+    path.write_bytes(jpg.tobytes()[:2] + app1 + jpg.tobytes()[2:])
+    img = read_image(path)
+    assert img.shape == frame.shape
+    assert np.abs(img.astype(int) - frame).mean() < 2.0   # upright again (JPEG's error only)

@@ -40,6 +40,11 @@ class VideoInfo:
         Seconds, as the container says (0 when it does not say).
     has_audio : bool
         Whether it has an audio stream.
+    turns : int
+        Quarter turns (counterclockwise, as :func:`numpy.rot90`) :func:`read_video` gives
+        each decoded frame: a face filmed sideways or upside down, after ffmpeg has applied
+        the rotation tag (found by :func:`lipsync.videobank.sources.find_upright`). ``size``
+        is the turned frames' size.
     """
 
     path: Path
@@ -47,6 +52,7 @@ class VideoInfo:
     size: Tuple[int, int]
     duration: float
     has_audio: bool
+    turns: int = 0
 
     @property
     def frame_count(self) -> int:
@@ -54,8 +60,20 @@ class VideoInfo:
         return int(round(self.duration * self.fps))
 
 
+def _rotation_note(record) -> bool:
+    """imageio-ffmpeg's note that a rotation tag changed the frame size: expected (ffmpeg
+    turns a phone's portrait video upright), so not shown to users."""
+    return "is different from the source frame size" not in record.getMessage()
+
+
 def _reader(path: Path, **kwargs):
+    import logging
+
     import imageio_ffmpeg
+
+    log = logging.getLogger("imageio_ffmpeg")
+    if _rotation_note not in log.filters:
+        log.addFilter(_rotation_note)
 
     if not path.is_file():
         raise InputError("no such file" if not path.exists() else "not a file", path=path)
@@ -116,8 +134,15 @@ def read_video(path: PathLike, *, info: Optional[VideoInfo] = None) -> Iterator[
     gen, meta = _reader(p)
     vi = info or _info(p, meta)
     w, h = vi.size
+    turns = vi.turns % 4
+    if turns % 2:
+        w, h = h, w  # decoded before the turn
     try:
         for buf in gen:
-            yield np.frombuffer(buf, np.uint8).reshape(h, w, 3)
+            frame = np.frombuffer(buf, np.uint8).reshape(h, w, 3)
+            if turns:
+                frame = np.ascontiguousarray(np.rot90(frame, turns))
+                frame.flags.writeable = False
+            yield frame
     finally:
         gen.close()

@@ -284,7 +284,7 @@ def cut_and_choose(footage: Footage, finalists: Dict[str, List[Candidate]], cfg:
         for i, s in enumerate(src):
             wanted = sorted({c.frame for c in cands if c.video == i})
             got = {f: raw[(i, f)] for f in wanted} if all((i, f) in raw for f in wanted) else (
-                grab_frames(s.path, wanted) if wanted else {})
+                grab_frames(s.path, wanted, info=s.info) if wanted else {})
             for f, img in got.items():
                 if keep:
                     raw[(i, f)] = img
