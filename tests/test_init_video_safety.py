@@ -215,3 +215,19 @@ def test_jpeg_exif_orientation_is_honoured(tmp_path):
     img = read_image(path)
     assert img.shape == frame.shape
     assert np.abs(img.astype(int) - frame).mean() < 2.0   # upright again (JPEG's error only)
+
+
+# ---------------------------------------------------------------- item 6: a silent sound track
+
+def test_a_silent_sound_track_is_exit_2_and_the_transcript_is_not_dropped_silently(tmp_path, capsys):
+    silent = tmp_path / "silent.mp4"
+    _ffmpeg("-i", CLIP, "-f", "lavfi", "-i", "anullsrc=r=16000:cl=mono", "-map", "0:v", "-map", "1:a", "-shortest",
+            "-c:v", "libx264", "-preset", "ultrafast", "-c:a", "aac", silent)
+    out = tmp_path / "me"
+    code, err = _exit(["init", out, "--video", silent, "--text", "bin blue with m five soon", "--quiet"], capsys)
+    assert code == 2 and f"{silent}: its sound track has no speech" in err
+    assert "the transcript (--text) could not be used" in err
+    assert not out.exists() and sorted(p.name for p in tmp_path.iterdir()) == ["silent.mp4"]
+    # the aligner itself says so too (lipsync align --text on silence)
+    with pytest.warns(UserWarning, match="the audio is silent; the transcript was not used"):
+        _exit(["align", silent, "--text", "bin blue", "-o", tmp_path / "a.TextGrid"], capsys)

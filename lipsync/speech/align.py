@@ -899,6 +899,9 @@ def align_samples(pcm: np.ndarray, text: Optional[str] = None, *, quiet: bool = 
                       MissingWordsWarning, stacklevel=2)
     energy = _frame_energy(pcm)
     if len(energy) == 0 or float(energy.max()) < SILENCE_DBFS:
+        if has_text:  # never dropped without a word (issue 32)
+            warnings.warn(f"{path or 'audio'}: the audio is silent; the transcript was not used", AlignmentWarning,
+                          stacklevel=2)
         return Alignment(_timeline((), duration, path), _timeline((), duration, path), duration,
                          transcript=transcript, recognised=not has_text, missing=missing)
     pcm = _dither(pcm)
