@@ -231,3 +231,48 @@ def test_a_silent_sound_track_is_exit_2_and_the_transcript_is_not_dropped_silent
     # the aligner itself says so too (lipsync align --text on silence)
     with pytest.warns(UserWarning, match="the audio is silent; the transcript was not used"):
         _exit(["align", silent, "--text", "bin blue", "-o", tmp_path / "a.TextGrid"], capsys)
+
+
+# ---------------------------------------------------------------- item 11: smaller holes
+
+def test_underflowing_dominances_are_refused(tmp_path):
+    from lipsync._data import default_bank_dir
+    from lipsync.bank import Bank
+    from lipsync.coarticulation import MIN_DOMINANCE, as_params
+
+    with pytest.raises(InputError, match="closure.dominance"):
+        as_params({"closure": {"dominance": 5e-324}})
+    assert as_params({"closure": {"dominance": MIN_DOMINANCE}}).closure.dominance == MIN_DOMINANCE
+    bank = tmp_path / "bank"
+    shutil.copytree(default_bank_dir(), bank)
+    with open(bank / "bank.yaml", "a") as f:
+        f.write("coarticulation: {closure: {dominance: 5.0e-324}}\n")
+    with pytest.raises(InputError, match="dominance"):
+        Bank.load(bank)
+
+
+def test_photo_only_options_are_refused_with_video(tmp_path, capsys):
+    for extra in (["--over", tmp_path / "body.png"], ["--at", "10,20"]):
+        code, err = _exit(["init", tmp_path / "me", "--video", CLIP, *extra, "--quiet"], capsys)
+        assert code == 2 and f"{extra[0]} is for a folder of images" in err
+
+
+def test_audio_only_mp4_has_no_video_stream(tmp_path, capsys):
+    sound = tmp_path / "voice.mp4"
+    _ffmpeg("-f", "lavfi", "-i", "sine=duration=1", sound)
+    code, err = _exit(["init", tmp_path / "me", "--video", sound, "--quiet"], capsys)
+    assert code == 2 and f"{sound}: has no video stream" in err and "Invalid argument" not in err
+
+
+def test_a_face_too_small_or_cut_by_the_frame_is_refused(turned, tmp_path, capsys):
+    tiny, edge = tmp_path / "tiny.mp4", tmp_path / "edge.mp4"
+    _ffmpeg("-i", turned / "upright.mp4", "-vf", "scale=32:32", "-c:a", "copy", tiny)
+    # the head at the frame's edge: what is left of it would be a 42x238 bank (0.8 eye distances wide)
+    _ffmpeg("-i", turned / "upright.mp4", "-vf", "crop=225:288:135:0", "-c:a", "copy", edge)
+    for clip in (tiny, edge):
+        clip.with_suffix(".txt").write_text("bin blue with m five soon\n")
+    code, err = _exit(["init", tmp_path / "a", "--video", tiny, "--quiet"], capsys)
+    assert code == 2 and "tiny.mp4: the face is too small: 4 px between the eyes in a 32x32 picture" in err
+    code, err = _exit(["init", tmp_path / "b", "--video", edge, "--quiet"], capsys)
+    assert code == 2 and "the face is cut: the bank's pictures would be 42x238 px, 0.8 eye distances" in err
+    assert not (tmp_path / "a").exists() and not (tmp_path / "b").exists()

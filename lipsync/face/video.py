@@ -89,6 +89,9 @@ def _reader(path: Path, **kwargs):
         gen.close()
         if refused(str(e)):
             raise InputError(REFUSED_TEXT, path=path) from None
+        if "Output file does not contain any stream" in str(e):  # it opened, but holds only sound
+            raise InputError("has no video stream (only sound): give a video of the speaker's face",
+                             path=path) from None
         text = str(e).strip().splitlines()
         raise InputError("not a video ffmpeg can read" + (f" ({text[-1]})" if text else ""), path=path) from None
     return gen, meta

@@ -209,6 +209,26 @@ def make_bank(outdir: PathLike, videos: Sequence[PathLike], *, text: Optional[st
     return assemble(outdir, footage, ranked, pictures, pmap, cfg, seconds, inputs=inputs)
 
 
+#: Narrowest picture, in eye distances, in which the face room still finds the face: crops
+#: of bank pictures (init --video of bbwm5s.mpg, 46 px between the eyes) centred on the face
+#: were found down to 1.5 eye distances wide (lip points within 0.023 eye distances of the
+#: whole picture's), and 2 of 3 were not at 1.2. A head at the frame's edge gave 40x234.
+MIN_PICTURE_EYE_DISTANCES = 1.5
+
+
+def _check_trackable(names: str, w: int, h: int, scale: float) -> None:
+    """Refuse a bank the face room could not find the face in again (editor, dub, init DIR)."""
+    from .sources import MIN_EYE_DISTANCE_PX
+
+    if scale < MIN_EYE_DISTANCE_PX:
+        raise InputError(f"the bank's pictures ({w}x{h}) would have {scale:.0f} px between the eyes; at least "
+                         f"{MIN_EYE_DISTANCE_PX:g} are needed to place the lips (a larger --size)", path=names)
+    if min(w, h) < MIN_PICTURE_EYE_DISTANCES * scale:
+        raise InputError(f"the face is cut: the bank's pictures would be {w}x{h} px, {min(w, h) / scale:.1f} eye "
+                         f"distances across, and the face needs {MIN_PICTURE_EYE_DISTANCES:g} (keep the whole head "
+                         f"in view)", path=names)
+
+
 def _inputs(videos: Sequence[PathLike], text: Optional[str]) -> List[PathLike]:
     """The files a bank is made from (the bank's folder may not hold them)."""
     return list(videos) + ([text] if text is not None and os.path.isfile(text) else [])
@@ -324,6 +344,7 @@ def assemble(outdir: Path, footage: Footage, ranked: Dict[str, List[Candidate]],
     t = time.perf_counter()
     names, chosen, frame = footage.names, pictures.chosen, pictures.framing
     w, h = frame.size
+    _check_trackable(names, w, h, frame.scale)
     order = _viseme_order(pmap)
     shown = [v for v in order if v in chosen]
     missing = {v: select.nearest_available(v, shown, fallback=pmap.fallback) for v in order if v not in chosen}
