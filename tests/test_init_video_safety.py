@@ -276,3 +276,13 @@ def test_a_face_too_small_or_cut_by_the_frame_is_refused(turned, tmp_path, capsy
     code, err = _exit(["init", tmp_path / "b", "--video", edge, "--quiet"], capsys)
     assert code == 2 and "the face is cut: the bank's pictures would be 42x238 px, 0.8 eye distances" in err
     assert not (tmp_path / "a").exists() and not (tmp_path / "b").exists()
+
+
+def test_a_face_tilted_halfway_between_turns_is_refused_not_guessed(turned, tmp_path):
+    from lipsync.face.video import probe_video
+    from lipsync.videobank.sources import find_upright
+
+    tilted = tmp_path / "tilt45.mp4"
+    _ffmpeg("-i", turned / "upright.mp4", "-t", "4", "-vf", "rotate=PI/4:ow=460:oh=460", "-c:a", "copy", tilted)
+    with pytest.raises(InputError, match=r"tilt45.mp4: cannot tell which way up the face is \(tilted 4\d degrees\)"):
+        find_upright(tilted, probe_video(tilted))
