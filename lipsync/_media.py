@@ -53,7 +53,7 @@ MEDIA_DEMUXERS = (
 )
 
 #: What :func:`lipsync.encode.probe` may also read back: the animations lipsync writes.
-OUTPUT_DEMUXERS = MEDIA_DEMUXERS + ("gif", "webp_anim", "apng", "image2", "png_pipe")
+OUTPUT_DEMUXERS = MEDIA_DEMUXERS + ("gif", "webp_anim", "apng")
 
 #: Words ffmpeg says when the whitelist refused the file (its probe found another format).
 REFUSED_MARKER = "not on whitelist"
