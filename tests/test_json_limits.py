@@ -20,6 +20,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+import lipsync._files
 from hypothesis_profiles import FUZZ, PROFILE
 from lipsync._files import MAX_INPUT_BYTES, MAX_JSON_DEPTH, json_depth, load_json
 from lipsync.atlas.schema import load_atlas
@@ -50,6 +51,12 @@ def _depth(v) -> int:
 def test_json_depth_agrees_with_a_recursive_count(value):
     text = json.dumps(value)
     assert json_depth(text) == _depth(value)
+    saved = lipsync._files._DEPTH_CHUNK
+    lipsync._files._DEPTH_CHUNK = 3  # what carries from chunk to chunk: open strings, backslash runs
+    try:
+        assert json_depth(text) == _depth(value)
+    finally:
+        lipsync._files._DEPTH_CHUNK = saved
     if _depth(value) <= MAX_JSON_DEPTH:
         assert load_json(text, "v.json") == json.loads(text)
 
