@@ -286,3 +286,10 @@ def test_a_face_tilted_halfway_between_turns_is_refused_not_guessed(turned, tmp_
     _ffmpeg("-i", turned / "upright.mp4", "-t", "4", "-vf", "rotate=PI/4:ow=460:oh=460", "-c:a", "copy", tilted)
     with pytest.raises(InputError, match=r"tilt45.mp4: cannot tell which way up the face is \(tilted 4\d degrees\)"):
         find_upright(tilted, probe_video(tilted))
+
+
+def test_a_failing_run_makes_no_folders(tmp_path, capsys):
+    code, err = _exit(["init", tmp_path / "new" / "deep" / "me", "--video", tmp_path / "missing.mpg", "--quiet"],
+                      capsys)
+    assert code == 2 and "missing.mpg" in err
+    assert list(tmp_path.iterdir()) == []

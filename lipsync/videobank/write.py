@@ -113,10 +113,23 @@ def write_error(exc: OSError, outdir: Path) -> Exception:
 
 
 def check_writable(outdir: Path) -> None:
-    """Before any work: make ``outdir``'s parent, remove what killed runs left beside it,
-    and prove a staging folder can be made there (read-only disks, a file in the path, a
-    name too long fail now, not after minutes of work)."""
-    os.rmdir(Staging(outdir)._make_tmp())
+    """Before any work: remove what killed runs left beside ``outdir`` and prove a staging
+    folder can be made there (read-only disks, a file in the path, a name too long fail now,
+    not after minutes of work). Folders made for the proof are removed again: a run that
+    fails later leaves nothing."""
+    missing = []
+    parent = _resolved(Path(outdir)).parent
+    while not parent.exists() and parent != parent.parent:
+        missing.append(parent)
+        parent = parent.parent
+    try:
+        os.rmdir(Staging(outdir)._make_tmp())
+    finally:
+        for folder in missing:  # deepest first
+            try:
+                folder.rmdir()
+            except OSError:
+                pass
 
 
 class Staging:
