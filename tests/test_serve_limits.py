@@ -129,3 +129,14 @@ def test_sigterm_stops_serve_within_seconds_while_a_job_renders(tmp_path):
     pid = int(ffmpeg[0].split()[0])
     time.sleep(0.2)
     assert subprocess.run(["ps", "-p", str(pid)], capture_output=True).returncode != 0  # ffmpeg gone
+
+
+def test_audio_over_the_limit_is_measured_by_decoding_and_refused_before_aligning():
+    srv = Server(max_clip_seconds=2.0)
+    try:
+        job = srv.submit("hello.wav", (ROOT / "samples" / "hello.wav").read_bytes())   # 2.97 s of speech
+        state = srv.wait(job, timeout=20)
+        assert state["state"] == "error" and state["frames"] == 0
+        assert "hello.wav: lasts more than 2 s; this server renders at most 2 s per job" in state["error"]
+    finally:
+        srv.stop()

@@ -79,7 +79,6 @@ class Jobs:
         self._lock = threading.Lock()
         self._queue: "queue.Queue" = queue.Queue()
         self._stop = threading.Event()
-        self._running: Optional[Job] = None
         self._worker = threading.Thread(target=self._serve_queue, name="lipsync-render", daemon=True)
         self._worker.start()
 
@@ -140,21 +139,21 @@ class Jobs:
 
             # decoded (a header's duration can lie), and no further than just past the limit
             seconds = len(load_audio(source, max_seconds=self.max_clip_seconds + 1)) / SAMPLE_RATE
-            clip = str(source)
+            clip, length = str(source), f"more than {self.max_clip_seconds:g} s"
         else:
             clip = read_timeline(source, options.timeline_format, tier=options.tier, sample_rate=options.sample_rate,
                                  fps=options.moho_fps)
             seconds = clip.end
+            length = f"{seconds:.0f} s"
         if seconds > self.max_clip_seconds:
-            raise InputError(f"lasts {seconds:.0f} s; this server renders at most {self.max_clip_seconds:g} s per "
-                             f"job (--max-clip-seconds)", path=source)
+            raise InputError(f"lasts {length}; this server renders at most {self.max_clip_seconds:g} s per job "
+                             f"(--max-clip-seconds)", path=source)
         return clip
 
     def _run(self, job: Job, source: Path, options, fps: float) -> None:
         from ..clip import render_clip
 
         job.state = "running"
-        self._running = job
         deadline = time.monotonic() + self.job_timeout
 
         def progress(done: int, total: int) -> None:
@@ -178,8 +177,6 @@ class Jobs:
         except Exception as exc:  # reported to the client; the server carries on
             job.error = f"render failed: {type(exc).__name__}: {str(exc)[:200]}".replace(str(job.folder), "")
             job.state = "error"
-        finally:
-            self._running = None
 
     def get(self, job_id: str) -> Optional[Job]:
         with self._lock:
