@@ -56,6 +56,9 @@ REFS = {
     "cache": "cache:{p}",
     "async": "async:file:{p}",
     "relative": "../secret/{name}",
+    "crypto": "crypto:{p}",
+    "tee": "tee:{p}|{p}",
+    "concatf": "concatf:{p}",
 }
 TARGETS = ("secret.mp3", "secret.ts", "secret.wav")
 EXTENSIONS = (".m3u8", ".m3u", ".wav", ".mp3", ".mp4", ".ts", ".ffconcat", ".txt", ".mpd", ".sdp", ".ogg")
@@ -202,3 +205,16 @@ def test_serve_render_job_of_an_hls_playlist_is_refused(secrets, tmp_path):
         handle.stop()
         server.close()
         session.close()
+
+
+def test_an_image2_pattern_name_never_reads_its_siblings(tmp_path):
+    # ffmpeg's image2 demuxer reads "frame%03d.png" as frame001.png, frame002.png, ...: files
+    # the name only points at. The literal file is refused, the sequence never read.
+    import cv2
+
+    for i in range(1, 4):
+        cv2.imwrite(str(tmp_path / f"frame{i:03d}.png"), np.full((16, 16, 3), 60 * i, np.uint8))
+    pattern = tmp_path / "frame%03d.png"
+    pattern.write_bytes((tmp_path / "frame001.png").read_bytes())
+    with pytest.raises(InputError, match="not a sound or video container"):
+        probe_video(pattern)
