@@ -164,7 +164,10 @@ def read_input_bytes(path: PathLike, what: str, *, error: type = None, limit: in
     bound = MAX_INPUT_BYTES if limit is None else limit
     try:
         with open(path, "rb") as fh:
-            data = fh.read(bound + 1)
+            size = os.fstat(fh.fileno()).st_size if os.path.isfile(path) else None
+            if limit is None and size is not None and size > bound:
+                raise error(f"larger than {bound >> 20} MB: not {what}", path=path)
+            data = _read_at_most(fh, bound + 1, size)
     except FileNotFoundError:
         raise error(missing, path=path) from None
     except IsADirectoryError:
@@ -174,6 +177,26 @@ def read_input_bytes(path: PathLike, what: str, *, error: type = None, limit: in
     if limit is None and len(data) > bound:
         raise error(f"larger than {bound >> 20} MB: not {what}", path=path)
     return data
+
+
+def _read_at_most(fh, n: int, size=None) -> bytes:
+    """Up to ``n`` bytes of ``fh``, allocating no more than what is there: ``fh.read(n)``
+    would reserve ``n`` bytes at once, 64 MB for every small timeline. ``size``: the
+    file's size when it is a regular file."""
+    if size is not None and size < n:
+        return fh.read(size + 1)  # +1: a file that grew since is still seen to be longer
+    chunks, got = [], 0
+    while got < n:
+        chunk = fh.read(min(_READ_CHUNK, n - got))
+        if not chunk:
+            break
+        chunks.append(chunk)
+        got += len(chunk)
+    return b"".join(chunks)
+
+
+#: Bytes per read of a file whose size is not known up front (a pipe, ``/dev/zero``).
+_READ_CHUNK = 1 << 20
 
 
 def json_depth(text: str) -> int:
