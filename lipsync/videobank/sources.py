@@ -164,7 +164,7 @@ def find_upright(path: PathLike, info: VideoInfo, mesh=None) -> VideoInfo:
         try:
             with warnings.catch_warnings():  # "2 faces found": the tracker warns about that itself
                 warnings.simplefilter("ignore")
-                p = mesh.find(f)
+                p = mesh.find(f, refine=0)  # the detector's region is close enough for a direction
         except NoFaceError:
             continue
         up = (p[33, :2] + p[263, :2]) / 2 - (p[13, :2] + p[14, :2]) / 2  # mouth to eyes
