@@ -36,7 +36,7 @@ test-browser: $(STAMP)
 	$(BIN)/python -m pytest -q -s -p no:cacheprovider tests/test_browser_editor.py
 
 fuzz: $(STAMP)
-	HYPOTHESIS_PROFILE=fuzz $(BIN)/python -m pytest -q -p no:cacheprovider tests/test_fuzz.py tests/test_hostile_inputs.py
+	HYPOTHESIS_PROFILE=fuzz $(BIN)/python -m pytest -q -p no:cacheprovider tests/test_fuzz.py tests/test_hostile_inputs.py tests/test_json_limits.py
 
 clean:
 	rm -rf $(VENV) build *.egg-info .pytest_cache demo.mp4
