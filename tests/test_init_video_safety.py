@@ -267,15 +267,28 @@ def test_audio_only_mp4_has_no_video_stream(tmp_path, capsys):
 def test_a_face_too_small_or_cut_by_the_frame_is_refused(turned, tmp_path, capsys):
     tiny, edge = tmp_path / "tiny.mp4", tmp_path / "edge.mp4"
     _ffmpeg("-i", turned / "upright.mp4", "-vf", "scale=32:32", "-c:a", "copy", tiny)
-    # the head at the frame's edge: what is left of it would be a 42x238 bank (0.8 eye distances wide)
+    # the head at the frame's edge: a 42x238 bank (0.8 eye distances wide) before, lips cut
     _ffmpeg("-i", turned / "upright.mp4", "-vf", "crop=225:288:135:0", "-c:a", "copy", edge)
     for clip in (tiny, edge):
         clip.with_suffix(".txt").write_text("bin blue with m five soon\n")
     code, err = _exit(["init", tmp_path / "a", "--video", tiny, "--quiet"], capsys)
     assert code == 2 and "tiny.mp4: the face is too small: 4 px between the eyes in a 32x32 picture" in err
     code, err = _exit(["init", tmp_path / "b", "--video", edge, "--quiet"], capsys)
-    assert code == 2 and "the face is cut: the bank's pictures would be 42x238 px, 0.8 eye distances" in err
-    assert not (tmp_path / "a").exists() and not (tmp_path / "b").exists()
+    assert code == 2 and "edge.mp4: the mouth is outside the picture in" in err
+    # narrower than the face room finds a face in (1.5 eye distances), even with the lips inside
+    from lipsync.videobank.make import _check_trackable
+
+    with pytest.raises(InputError, match=r"the face is cut: the bank's pictures would be 42x238 px, 0.9 eye"):
+        _check_trackable("edge.mp4", 42, 238, 49.0)
+    _check_trackable("ok.mp4", 74, 238, 49.0)   # 1.51 eye distances: accepted
+    # the frame's bottom through the lips (GRID's lower lip reaches row 216): exit 1 and a
+    # cv2.error in select.sharpness before, or a bank whose lines lie off its pictures
+    cut = tmp_path / "cut.mp4"
+    _ffmpeg("-i", turned / "upright.mp4", "-vf", "crop=360:200:0:0", "-c:a", "copy", cut)
+    cut.with_suffix(".txt").write_text("bin blue with m five soon\n")
+    code, err = _exit(["init", tmp_path / "c", "--video", cut, "--quiet"], capsys)
+    assert code == 2 and "cut.mp4: the mouth is outside the picture in" in err
+    assert not any((tmp_path / n).exists() for n in "abc")
 
 
 def test_a_face_tilted_halfway_between_turns_is_refused_not_guessed(turned, tmp_path):

@@ -229,6 +229,14 @@ def _check_trackable(names: str, w: int, h: int, scale: float) -> None:
                          f"in view)", path=names)
 
 
+def _lips_inside(points: np.ndarray, w: int, h: int) -> bool:
+    """Whether the outer lip contour of ``points`` lies inside a ``w`` x ``h`` picture."""
+    from ..face import topology as T
+
+    lips = np.asarray(points)[list(T.LIP_OUTER_UPPER + T.LIP_OUTER_LOWER), :2]
+    return bool((lips >= 0).all() and (lips[:, 0] <= w - 1).all() and (lips[:, 1] <= h - 1).all())
+
+
 def _inputs(videos: Sequence[PathLike], text: Optional[str]) -> List[PathLike]:
     """The files a bank is made from (the bank's folder may not hold them)."""
     return list(videos) + ([text] if text is not None and os.path.isfile(text) else [])
@@ -315,6 +323,15 @@ def cut_and_choose(footage: Footage, finalists: Dict[str, List[Candidate]], cfg:
     w, h = frame.size
     raw: Dict[tuple, np.ndarray] = {}
     keep = sum(int(np.prod(src[c.video].info.size)) * 3 for c in flat) <= RAW_BUDGET_BYTES
+    # a frame that cuts the face can leave the mouth out of the picture (no sharpness to
+    # measure, lines off the picture): such finalists are dropped, or the footage refused
+    inside = {(c.video, c.frame): _lips_inside(points(frame, c), w, h) for c in flat}
+    if sum(inside.values()) < len(inside) / 2 or not all(any(inside[(c.video, c.frame)] for c in fs)
+                                                         for fs in finalists.values()):
+        raise InputError(f"the mouth is outside the picture in {len(inside) - sum(inside.values())} of the "
+                         f"{len(inside)} frames chosen from: the frame cuts the face (keep the whole head in view)",
+                         path=footage.names)
+    finalists = {v: [c for c in fs if inside[(c.video, c.frame)]] for v, fs in finalists.items()}
     images = cut(frame, flat, raw, keep)
     chosen: Dict[str, Candidate] = {}
     for v, fs in finalists.items():
