@@ -42,7 +42,7 @@ test-blender: $(STAMP)
 	$(BIN)/python -m pytest -q -s -p no:cacheprovider tests/test_blender.py
 
 fuzz: $(STAMP)
-	HYPOTHESIS_PROFILE=fuzz $(BIN)/python -m pytest -q -p no:cacheprovider tests/test_fuzz.py
+	HYPOTHESIS_PROFILE=fuzz $(BIN)/python -m pytest -q -p no:cacheprovider tests/test_fuzz.py tests/test_hostile_inputs.py tests/test_json_limits.py
 
 # The documentation site (docs/, Sphinx + MyST + numpydoc), offline, warnings as errors:
 # a broken link, reference or page fails. The CLI and API references and the benchmark page

@@ -128,11 +128,24 @@ def remove_dead_partials_in(folder: PathLike) -> List[Path]:
     return removed
 
 
+#: Largest file :func:`read_input_bytes` reads whole unless told otherwise: timelines,
+#: transcripts, JSON documents. An hour of MFA TextGrid (words and phones) is about 3 MB, so
+#: 64 MB is ~20 hours; more is a mistake (or ``/dev/zero``), refused before it fills memory.
+MAX_INPUT_BYTES = 64 << 20
+
+#: Deepest JSON nesting :func:`load_json` hands to Python's parser: far beyond any document
+#: lipsync reads (an atlas nests 4 levels), far below the ~1000 at which the parser recurses
+#: out of stack (``RecursionError``).
+MAX_JSON_DEPTH = 100
+
+
 def read_input_bytes(path: PathLike, what: str, *, error: type = None, limit: int = None,
                      missing: str = "no such file") -> bytes:
     """The bytes of a file the user named, or ``error`` (an :class:`~lipsync.errors.InputError`
-    class) naming it: missing, a folder ("not WHAT"), unreadable. With ``limit``, at most
-    ``limit + 1`` bytes are read, so a caller can refuse a larger file without loading it.
+    class) naming it: missing, a folder ("not WHAT"), unreadable, or larger than
+    :data:`MAX_INPUT_BYTES` ("larger than 64 MB: not WHAT", found after reading no more than
+    that: ``/dev/zero`` fails at once). With ``limit``, at most ``limit + 1`` bytes are read
+    and returned, so a caller can refuse a larger file (or use a head) itself.
 
     Examples
     --------
@@ -148,17 +161,150 @@ def read_input_bytes(path: PathLike, what: str, *, error: type = None, limit: in
     from .errors import InputError
 
     error = error or InputError
+    bound = MAX_INPUT_BYTES if limit is None else limit
     try:
-        if limit is None:
-            return Path(path).read_bytes()
         with open(path, "rb") as fh:
-            return fh.read(limit + 1)
+            size = os.fstat(fh.fileno()).st_size if os.path.isfile(path) else None
+            if limit is None and size is not None and size > bound:
+                raise error(f"larger than {bound >> 20} MB: not {what}", path=path)
+            data = _read_at_most(fh, bound + 1, size)
     except FileNotFoundError:
         raise error(missing, path=path) from None
     except IsADirectoryError:
         raise error(f"is a folder, not {what}", path=path) from None
     except OSError as exc:
         raise error(f"cannot read: {exc.strerror or exc}", path=path) from None
+    if limit is None and len(data) > bound:
+        raise error(f"larger than {bound >> 20} MB: not {what}", path=path)
+    return data
+
+
+def _read_at_most(fh, n: int, size=None) -> bytes:
+    """Up to ``n`` bytes of ``fh``, allocating no more than what is there: ``fh.read(n)``
+    would reserve ``n`` bytes at once, 64 MB for every small timeline. ``size``: the
+    file's size when it is a regular file."""
+    if size is not None and size < n:
+        return fh.read(size + 1)  # +1: a file that grew since is still seen to be longer
+    chunks, got = [], 0
+    while got < n:
+        chunk = fh.read(min(_READ_CHUNK, n - got))
+        if not chunk:
+            break
+        chunks.append(chunk)
+        got += len(chunk)
+    return b"".join(chunks)
+
+
+#: Bytes per read of a file whose size is not known up front (a pipe, ``/dev/zero``).
+_READ_CHUNK = 1 << 20
+
+
+def json_depth(text: str) -> int:
+    """How deeply ``text`` (JSON) nests arrays and objects, brackets inside strings not counted.
+
+    Vectorised in chunks of :data:`_DEPTH_CHUNK` bytes (what carries over: the bracket level,
+    whether a string is open, a run of backslashes), so a 64 MB document takes well under a
+    second and a few MB of temporaries.
+
+    Examples
+    --------
+    >>> json_depth('{"a": [[1], "]]]"]}'), json_depth("[" * 5000)
+    (3, 5000)
+    """
+    import numpy as np
+
+    if "[" not in text and "{" not in text:
+        return 0
+    codes = text.encode("utf-8", "surrogatepass")
+    if b'"' not in codes:
+        return _bracket_depth(np.frombuffer(codes, dtype=np.uint8))
+    codes = np.frombuffer(codes, dtype=np.uint8)
+    deepest = level = 0
+    inside = 0       # 1 while a string is open at the chunk's start
+    slashes = 0      # backslashes ending the previous chunk
+    for start in range(0, len(codes), _DEPTH_CHUNK):
+        c = codes[start:start + _DEPTH_CHUNK]
+        n = len(c)
+        back = c == 92
+        quote = c == 34
+        if quote.any() and (slashes or back.any()):
+            at = np.flatnonzero(quote)
+            # backslashes right before each quote: an odd run escapes it
+            pos = np.arange(n, dtype=np.int32)
+            last_other = np.maximum.accumulate(np.where(back, np.int32(-1), pos))
+            before = np.where(at > 0, last_other[np.maximum(at - 1, 0)], -1)
+            run = (at - 1) - before + np.where(before < 0, slashes, 0)
+            quote[at[(run & 1) == 1]] = False
+        opened = np.bitwise_xor.accumulate(quote.view(np.uint8)) ^ np.uint8(inside)  # 1 inside a string
+        step = ((c == 91) | (c == 123)).view(np.int8) - ((c == 93) | (c == 125)).view(np.int8)
+        step[opened.view(bool)] = 0
+        run_level = np.cumsum(step, dtype=np.int32)
+        deepest = max(deepest, level + int(run_level.max()))
+        level += int(run_level[-1])
+        inside = int(opened[-1])
+        if back[-1]:
+            other = np.flatnonzero(~back)
+            tail = n - 1 - (int(other[-1]) if len(other) else -1)
+            slashes = tail + (slashes if tail == n else 0)
+        else:
+            slashes = 0
+    return deepest
+
+
+def _bracket_depth(codes) -> int:
+    """Deepest run of ``[``/``{`` over ``]``/``}`` in the bytes ``codes``, strings not told apart:
+    :func:`json_depth` of a text without strings, and at least that depth for any text."""
+    import numpy as np
+
+    deepest = level = 0
+    for start in range(0, len(codes), _DEPTH_CHUNK):
+        c = codes[start:start + _DEPTH_CHUNK]
+        run = np.cumsum(((c == 91) | (c == 123)).view(np.int8) - ((c == 93) | (c == 125)).view(np.int8),
+                        dtype=np.int32)
+        deepest = max(deepest, level + int(run.max()))
+        level += int(run[-1])
+    return deepest
+
+
+#: Bytes per step of :func:`json_depth` (a few MB of temporaries).
+_DEPTH_CHUNK = 1 << 20
+
+
+def load_json(text: str, path: PathLike, *, error: type = None, max_depth: int = MAX_JSON_DEPTH):
+    """``json.loads(text)``, refusing nesting deeper than ``max_depth`` before parsing (Python's
+    parser recurses, and a ``[[[[...`` of 100 kB overflows it) and naming ``path`` in every
+    error (``error``, an InputError class; JSON syntax errors give their line).
+
+    Examples
+    --------
+    >>> load_json('{"a": [1, 2]}', "x.json")
+    {'a': [1, 2]}
+    >>> load_json("[" * 100000, "deep.json")
+    Traceback (most recent call last):
+    ...
+    lipsync.errors.InputError: deep.json:1: JSON nested 100000 levels deep (at most 100 are read)
+    """
+    import json
+
+    from .errors import InputError
+
+    error = error or InputError
+    import numpy as np
+
+    # the bracket count ignoring strings bounds the depth from above: the exact count (which
+    # tells strings apart) only when that bound is over
+    over = text.count("[") + text.count("{") > max_depth and _bracket_depth(
+        np.frombuffer(text.encode("utf-8", "surrogatepass"), dtype=np.uint8)) > max_depth
+    depth = json_depth(text) if over else 0
+    if depth > max_depth:
+        raise error(f"JSON nested {depth} levels deep (at most {max_depth} are read)", path=path, line=1)
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise error(f"not valid JSON ({exc.msg})", path=path, line=exc.lineno) from None
+    except (ValueError, RecursionError) as exc:
+        # an integer of more than 4300 digits hits Python's int-from-text limit
+        raise error(f"not usable JSON ({str(exc)[:80]})", path=path, line=1) from None
 
 
 def _naming(exc: OSError, path: Path) -> OSError:

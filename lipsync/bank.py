@@ -602,7 +602,11 @@ def _read_image(path: Path, where: str, yaml_path: Path, line: Optional[int]) ->
         raise BankError(f"{where}: image file {path.name!r} is {size} bytes, too large", path=yaml_path, line=line)
     data = np.fromfile(str(path), dtype=np.uint8)
     try:
-        img = cv2.imdecode(data, cv2.IMREAD_UNCHANGED) if data.size else None
+        # A JPEG is decoded as every viewer (and the editor's browser) shows it: turned by
+        # its EXIF orientation (a phone's portrait photo is stored sideways with that tag).
+        # JPEGs have no alpha or 16 bits for IMREAD_UNCHANGED to keep.
+        flag = cv2.IMREAD_COLOR if data[:2].tobytes() == b"\xff\xd8" else cv2.IMREAD_UNCHANGED
+        img = cv2.imdecode(data, flag) if data.size else None
     except cv2.error:  # OpenCV's own size limit (2**30 pixels) raises instead of returning None
         img = None
     if img is None:

@@ -63,6 +63,11 @@ from .frames import FrameSpec, base_track, checked_frames
 from .timeline import VISEME, Timeline
 from .timing import DEFAULT_CURVE, check_timing, is_model
 
+#: Smallest dominance accepted. Weights are dominance x a tail in 0..1 and are compared as
+#: ratios: a subnormal dominance (5e-324) underflowed to 0 and turned 52 of 75 frames into
+#: fixed 0.5 blends. 1e-6 against the largest (1e4) keeps every ratio within float64.
+MIN_DOMINANCE = 1e-6
+
 #: The articulatory classes a viseme can have (what its dominance constants depend on).
 CLASSES = ("closure", "labiodental", "rounded", "open", "other", "rest")
 
@@ -90,7 +95,7 @@ class ClassTiming(BaseModel):
     """
 
     model_config = ConfigDict(extra="forbid", frozen=True)
-    dominance: float = Field(gt=0, le=1e4)
+    dominance: float = Field(ge=MIN_DOMINANCE, le=1e4)
     anticipation: float = Field(ge=0, le=0.3)
     carryover: float = Field(ge=0, le=0.3)
 
@@ -166,7 +171,7 @@ class ClassTimingOverrides(BaseModel):
     """Some constants of one class, as bank.yaml's ``coarticulation:`` may give them."""
 
     model_config = ConfigDict(extra="forbid", frozen=True)
-    dominance: Optional[float] = Field(None, gt=0, le=1e4)
+    dominance: Optional[float] = Field(None, ge=MIN_DOMINANCE, le=1e4)
     anticipation: Optional[float] = Field(None, ge=0, le=0.3)
     carryover: Optional[float] = Field(None, ge=0, le=0.3)
 

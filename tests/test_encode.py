@@ -216,7 +216,7 @@ def test_announced_frame_count_runs_one_ffmpeg_and_is_enforced(tmp_path, monkeyp
     with open_writer(tmp_path / "one.mp4", fps=FPS, size=(W, H), audio=wav, quiet=True, frames=20) as w:
         for f in frames:
             w.write(f)
-    assert len(started) == 1 and str(wav) in started[0]
+    assert len(started) == 1 and f"file:{wav}" in started[0]  # opened as a plain file (lipsync._media)
     assert probe(tmp_path / "one.mp4")["streams"] == [("video", "h264"), ("audio", "aac")]
     # fewer frames than announced: an error, and nothing left behind
     with pytest.raises(EncodeError, match="19 frames were written, 20 were announced"):

@@ -148,14 +148,18 @@ def test_staging_leaves_nothing_on_failure_and_replaces_with_force(tmp_path):
     assert list(tmp_path.iterdir()) == []
     out.mkdir()
     (out / "old.txt").write_text("old")
-    with pytest.raises(InputError, match="not empty"):
+    with pytest.raises(InputError, match="not a bank"):   # --force replaces only a bank (issue 32)
+        with Staging(out, force=True):
+            pass
+    (out / "old.txt").rename(out / "bank.yaml")
+    with pytest.raises(InputError, match="holds a bank; use --force"):
         with Staging(out):
             pass
     with pytest.raises(RuntimeError):
         with Staging(out, force=True) as tmp:
             (tmp / "new.txt").write_text("new")
             raise RuntimeError("disk full")
-    assert [p.name for p in out.iterdir()] == ["old.txt"]   # the previous bank is untouched
+    assert [p.name for p in out.iterdir()] == ["bank.yaml"]   # the previous bank is untouched
     with Staging(out, force=True) as tmp:
         (tmp / "new.txt").write_text("new")
     assert [p.name for p in out.iterdir()] == ["new.txt"]

@@ -55,7 +55,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Dict, List, Optional, Sequence, Tuple, Union
 
-from .._files import read_input_bytes
+from .._files import load_json, read_input_bytes
 from ..errors import InputError
 
 PathLike = Union[str, "os.PathLike[str]"]
@@ -251,11 +251,10 @@ def load_atlas(path: PathLike) -> Atlas:
     if len(data) > MAX_JSON_BYTES:
         raise InputError(f"larger than {MAX_JSON_BYTES >> 20} MB: not an atlas", path=p)
     try:
-        doc = json.loads(data.decode("utf-8-sig"))
-    except (UnicodeDecodeError, ValueError) as exc:
-        line = getattr(exc, "lineno", None)
-        raise InputError(f"not valid JSON ({getattr(exc, 'msg', exc)})", path=p, line=line) from None
-    return Atlas.from_dict(doc, p)
+        text = data.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise InputError(f"not valid JSON ({exc})", path=p) from None
+    return Atlas.from_dict(load_json(text, p), p)  # nesting bounded: no RecursionError
 
 
 def frames_document(atlas_ref: str, fps: float, duration: float, frames: Sequence[int],

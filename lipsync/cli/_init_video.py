@@ -8,7 +8,8 @@ import argparse
 from ._common import add_mismatch_option
 
 #: Options of the photo side that mean nothing for a video, with their defaults.
-_PHOTO_ONLY = {"template": "toon", "names": [], "face_box": None, "layout": "auto", "lines": "auto", "rest": None}
+_PHOTO_ONLY = {"template": "toon", "names": [], "face_box": None, "layout": "auto", "lines": "auto", "rest": None,
+               "over": None, "at": None}
 
 
 def add_video_options(p: argparse.ArgumentParser) -> None:
@@ -42,8 +43,8 @@ def run_video(args: argparse.Namespace) -> int:
 
     for name, default in _PHOTO_ONLY.items():
         if getattr(args, name, default) != default:
-            raise InputError(f"--{name.replace('_', '-')} is for a folder of images; with --video the lines "
-                             f"come from the face in the video")
+            raise InputError(f"--{name.replace('_', '-')} is for a folder of images; with --video the pictures "
+                             f"and their lines come from the face in the video")
     config = VideoBankConfig(map=args.map, size=parse_size(args.size) if args.size else None, force=args.force,
                              quiet=args.quiet, jobs=args.jobs, lang=args.lang)
     result = make_bank(args.folder, args.video, text=args.text, config=config)

@@ -14,6 +14,7 @@ def add_parser(sub) -> None:
     from ..server import (DEFAULT_IDLE_TIMEOUT_S, DEFAULT_MAX_SESSIONS, DEFAULT_MAX_UPLOAD, DEFAULT_QUALITY)
     from ..frames import DEFAULT_FPS
     from ..server.protocol import FPS_CHOICES
+    from ..server.jobs import DEFAULT_JOB_TIMEOUT_S, DEFAULT_MAX_CLIP_S
 
     p = sub.add_parser("serve", help="serve render jobs and live talking heads (HTTP + WebSocket, demo page)",
                        description="Serve POST /api/render (a timeline or audio to an mp4), the live WebSocket "
@@ -29,6 +30,12 @@ def add_parser(sub) -> None:
                    help=f"close a live session silent this long (default: {DEFAULT_IDLE_TIMEOUT_S:g} s)")
     p.add_argument("--max-upload-mb", type=float, default=DEFAULT_MAX_UPLOAD / (1 << 20), metavar="MB",
                    help=f"largest request body (default: {DEFAULT_MAX_UPLOAD >> 20} MB)")
+    p.add_argument("--max-clip-seconds", type=float, default=DEFAULT_MAX_CLIP_S, metavar="S",
+                   help=f"longest render job, seconds of video; longer uploads fail before any frame "
+                        f"(default: {DEFAULT_MAX_CLIP_S:g})")
+    p.add_argument("--job-timeout", type=float, default=DEFAULT_JOB_TIMEOUT_S, metavar="S",
+                   help=f"stop a render job running longer than this, so the jobs queued behind it start "
+                        f"(default: {DEFAULT_JOB_TIMEOUT_S:g} s)")
     p.add_argument("--fps", type=float, default=DEFAULT_FPS, choices=FPS_CHOICES, metavar="N",
                    help=f"frame rate of live sessions and render jobs (default: {DEFAULT_FPS:g})")
     p.add_argument("--quality", type=int, default=DEFAULT_QUALITY, metavar="Q",
@@ -56,7 +63,8 @@ def run(args: argparse.Namespace) -> int:
     config = ServeConfig(bank=args.bank, store=args.store, map=args.map, timing=args.timing, method=args.method,
                          fps=args.fps, quality=args.quality, max_sessions=args.max_sessions,
                          idle_timeout=args.idle_timeout, max_upload=int(max_upload_mb * (1 << 20)),
-                         workers=args.workers, quiet=args.quiet)
+                         workers=args.workers, quiet=args.quiet, max_clip_seconds=args.max_clip_seconds,
+                         job_timeout=args.job_timeout)
     try:
         serve(config, host=args.host, port=args.port)
     except KeyboardInterrupt:

@@ -31,6 +31,7 @@ from typing import Any, Dict, List, Optional, Tuple, Union
 
 import numpy as np
 
+from .._media import OUTPUT_DEMUXERS, REFUSED_TEXT, input_args, refused
 from ..errors import InputError, PathLike
 from . import base as _base
 from .base import STDERR_TAIL_CHARS, EncodeError, Writer, disk_full
@@ -111,6 +112,8 @@ def check_audio(audio: PathLike) -> str:
         info = probe_streams(path)
     except OSError as exc:  # ffmpeg itself missing or not runnable: not the user's file's fault
         raise EncodeError(f"cannot run ffmpeg to read the audio ({exc})", path=path) from exc
+    if not info["streams"] and refused(info["_text"]):
+        raise InputError(REFUSED_TEXT, path=path)
     if not any(kind == "audio" for kind, _ in info["streams"]):
         raise InputError("no audio stream that ffmpeg can read", path=path)
     return path
@@ -202,7 +205,7 @@ class PipeWriter(Writer):
         cmd = [ffmpeg_exe(), "-y", "-hide_banner", "-nostats", "-loglevel", "error"]
         cmd += self._input_args() + ["-framerate", fps_arg(self.fps), "-i", "pipe:0"]
         if self.single_pass:
-            cmd += ["-i", self.audio, "-map", "0:v:0", "-map", "1:a:0"]
+            cmd += [*input_args(self.audio), "-map", "0:v:0", "-map", "1:a:0"]
         else:
             cmd += ["-map", "0:v:0"]
         cmd += self._codec_args()
@@ -268,7 +271,7 @@ class PipeWriter(Writer):
         duration = self.n_frames / float(Fraction(self.fps))
         cmd = [
             ffmpeg_exe(), "-y", "-hide_banner", "-nostats", "-nostdin", "-loglevel", "error",
-            "-i", self.video_path, "-i", self.audio,
+            "-i", self.video_path, *input_args(self.audio),
             "-map", "0:v:0", "-map", "1:a:0", "-c:v", "copy",
             # Pad short audio with silence, then cut both at the video's length.
             "-af", "apad", *self.audio_args,
@@ -336,9 +339,10 @@ _STREAM_RE = re.compile(r"^\s*Stream #\d+:\d+\S*(?:\([^)]*\))?: (Video|Audio|Sub
 _DURATION_RE = re.compile(r"Duration: (\d+):(\d\d):(\d\d(?:\.\d+)?)")
 
 
-def probe_streams(path: str) -> Dict[str, Any]:
-    """Parse ``ffmpeg -i path``'s stream listing (ffmpeg exits 1 there: no output given)."""
-    res = subprocess.run([ffmpeg_exe(), "-hide_banner", "-nostdin", "-i", path],
+def probe_streams(path: str, demuxers=None) -> Dict[str, Any]:
+    """Parse ``ffmpeg -i path``'s stream listing (ffmpeg exits 1 there: no output given).
+    ``path`` is opened only as one of ``demuxers`` (:func:`lipsync._media.input_args`)."""
+    res = subprocess.run([ffmpeg_exe(), "-hide_banner", "-nostdin", *input_args(path, demuxers=demuxers)],
                          stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     text = res.stderr.decode("utf-8", "replace")
     info: Dict[str, Any] = {"streams": [], "duration": None, "width": None, "height": None,
@@ -406,7 +410,7 @@ def probe(path: PathLike) -> Dict[str, Any]:
     path = os.fspath(path)
     if not os.path.isfile(path):
         raise InputError("file not found", path=path)
-    info = probe_streams(path)
+    info = probe_streams(path, OUTPUT_DEMUXERS)
     text = info.pop("_text")
     if not info["streams"]:
         last = text.strip().splitlines()[-1] if text.strip() else "no streams"
@@ -416,14 +420,16 @@ def probe(path: PathLike) -> Dict[str, Any]:
     info["audio_duration"] = None
     if info["video_codec"] is not None:
         # Decode (not just count packets) so the count is what a player would show.
-        res = subprocess.run([ffmpeg_exe(), "-hide_banner", "-nostdin", "-i", path, "-map", "0:v:0",
+        res = subprocess.run([ffmpeg_exe(), "-hide_banner", "-nostdin", *input_args(path, demuxers=OUTPUT_DEMUXERS),
+                              "-map", "0:v:0",
                               "-f", "null", "-"], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
         frames = re.findall(r"frame=\s*(\d+)", res.stderr.decode("utf-8", "replace"))
         info["n_frames"] = int(frames[-1]) if frames else 0
         if info["fps"]:
             info["video_duration"] = info["n_frames"] / info["fps"]
     if info["audio_codec"] is not None:
-        proc = subprocess.Popen([ffmpeg_exe(), "-hide_banner", "-nostdin", "-loglevel", "error", "-i", path,
+        proc = subprocess.Popen([ffmpeg_exe(), "-hide_banner", "-nostdin", "-loglevel", "error",
+                                 *input_args(path, demuxers=OUTPUT_DEMUXERS),
                                  "-map", "0:a:0", "-ac", "1", "-ar", str(_PROBE_RATE), "-f", "s16le", "-"],
                                 stdout=subprocess.PIPE, stderr=subprocess.DEVNULL)
         n_bytes = 0

@@ -40,6 +40,11 @@ class VideoInfo:
         Seconds, as the container says (0 when it does not say).
     has_audio : bool
         Whether it has an audio stream.
+    turns : int
+        Quarter turns (counterclockwise, as :func:`numpy.rot90`) :func:`read_video` gives
+        each decoded frame: a face filmed sideways or upside down, after ffmpeg has applied
+        the rotation tag (found by :func:`lipsync.videobank.sources.find_upright`). ``size``
+        is the turned frames' size.
     """
 
     path: Path
@@ -47,6 +52,7 @@ class VideoInfo:
     size: Tuple[int, int]
     duration: float
     has_audio: bool
+    turns: int = 0
 
     @property
     def frame_count(self) -> int:
@@ -54,16 +60,38 @@ class VideoInfo:
         return int(round(self.duration * self.fps))
 
 
+def _rotation_note(record) -> bool:
+    """imageio-ffmpeg's note that a rotation tag changed the frame size: expected (ffmpeg
+    turns a phone's portrait video upright), so not shown to users."""
+    return "is different from the source frame size" not in record.getMessage()
+
+
 def _reader(path: Path, **kwargs):
+    import logging
+
     import imageio_ffmpeg
+
+    log = logging.getLogger("imageio_ffmpeg")
+    if _rotation_note not in log.filters:
+        log.addFilter(_rotation_note)
 
     if not path.is_file():
         raise InputError("no such file" if not path.exists() else "not a file", path=path)
-    gen = imageio_ffmpeg.read_frames(str(path), pix_fmt="rgb24", **kwargs)
+    from .._media import REFUSED_TEXT, input_args, refused
+
+    # only as a media container, never a playlist or list pointing at other files (lipsync._media)
+    *params, _, url = input_args(path)
+    gen = imageio_ffmpeg.read_frames(url, pix_fmt="rgb24", input_params=params + kwargs.pop("input_params", []),
+                                     **kwargs)
     try:
         meta = next(gen)
     except (OSError, RuntimeError, StopIteration) as e:
         gen.close()
+        if refused(str(e)):
+            raise InputError(REFUSED_TEXT, path=path) from None
+        if "Output file does not contain any stream" in str(e):  # it opened, but holds only sound
+            raise InputError("has no video stream (only sound): give a video of the speaker's face",
+                             path=path) from None
         text = str(e).strip().splitlines()
         raise InputError("not a video ffmpeg can read" + (f" ({text[-1]})" if text else ""), path=path) from None
     return gen, meta
@@ -109,8 +137,15 @@ def read_video(path: PathLike, *, info: Optional[VideoInfo] = None) -> Iterator[
     gen, meta = _reader(p)
     vi = info or _info(p, meta)
     w, h = vi.size
+    turns = vi.turns % 4
+    if turns % 2:
+        w, h = h, w  # decoded before the turn
     try:
         for buf in gen:
-            yield np.frombuffer(buf, np.uint8).reshape(h, w, 3)
+            frame = np.frombuffer(buf, np.uint8).reshape(h, w, 3)
+            if turns:
+                frame = np.ascontiguousarray(np.rot90(frame, turns))
+                frame.flags.writeable = False
+            yield frame
     finally:
         gen.close()

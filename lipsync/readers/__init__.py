@@ -107,7 +107,13 @@ def read_timeline(path: PathLike, format: Optional[str] = None, *, tier: Optiona
         raise InputError(f"sample rate must be a positive number, not {sample_rate!r}")
     if fps is None or not (0 < float(fps) < float("inf")):
         raise InputError(f"frame rate must be a positive number, not {fps!r}")
-    data = read_input_bytes(name, "a timeline file", error=TimelineError)
+    if (reader.name if reader is not None else READERS.name_for_extension(Path(name).suffix)) == "audio":
+        # ffmpeg decodes audio from the file itself: only the first bytes are read here
+        data = read_input_bytes(name, "a timeline file", error=TimelineError, limit=_SNIFF_BYTES)
+        if len(data) > _SNIFF_BYTES and reader is None and not READERS.get("audio").sniff(data):
+            data = read_input_bytes(name, "a timeline file", error=TimelineError)  # not audio after all
+    else:
+        data = read_input_bytes(name, "a timeline file", error=TimelineError)  # at most 64 MB
     if not data.strip():
         raise TimelineError("empty file", path=name, line=1)
     if reader is None:

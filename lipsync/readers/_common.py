@@ -157,19 +157,11 @@ def sniff_text(head: bytes) -> str:
 
 
 def load_json(path: str, text: str):
-    """``json.loads`` with JSON syntax errors turned into TimelineError at their line."""
-    import json
+    """``json.loads`` with its errors (syntax at their line, nesting too deep, an integer of
+    more than 4300 digits) as TimelineError naming the file (:func:`lipsync._files.load_json`)."""
+    from .._files import load_json as _load
 
-    try:
-        return json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise TimelineError(f"not valid JSON ({exc.msg})", path=path, line=exc.lineno) from None
-    except ValueError as exc:
-        # Found by fuzzing: an integer of more than 4300 digits hits Python's int-from-text
-        # limit, a plain ValueError (not a JSONDecodeError) that named no file.
-        raise TimelineError(f"not usable JSON ({str(exc)[:80]})", path=path, line=1) from None
-    except RecursionError:
-        raise TimelineError("JSON nested too deeply", path=path, line=1) from None
+    return _load(text, path, error=TimelineError)
 
 
 def json_array_lines(text: str, key: str) -> List[int]:

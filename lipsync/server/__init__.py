@@ -39,6 +39,7 @@ from typing import Optional
 
 from ..errors import InputError, check_number
 from ..frames import DEFAULT_FPS
+from .jobs import DEFAULT_JOB_TIMEOUT_S, DEFAULT_MAX_CLIP_S
 
 STATIC = Path(__file__).resolve().parent / "static"
 SAMPLES = Path(__file__).resolve().parents[2] / "samples"
@@ -62,6 +63,9 @@ MAX_SESSIONS_LIMIT = 10_000
 MAX_IDLE_TIMEOUT_S = 86400.0
 MAX_UPLOAD_LIMIT = 2 << 30
 MAX_WORKERS = 256
+#: ... and a render job's clip length and running time (a day each).
+MAX_CLIP_LIMIT_S = 86400.0
+MAX_JOB_TIMEOUT_S = 86400.0
 
 
 @dataclass(frozen=True)
@@ -86,6 +90,8 @@ class ServeConfig:
     max_upload: int = DEFAULT_MAX_UPLOAD
     workers: Optional[int] = None
     quiet: bool = True
+    max_clip_seconds: float = DEFAULT_MAX_CLIP_S
+    job_timeout: float = DEFAULT_JOB_TIMEOUT_S
 
     def __post_init__(self) -> None:
         # Every number checked here, once, for the CLI and the library alike: a NaN timeout
@@ -96,6 +102,8 @@ class ServeConfig:
         check_number(self.idle_timeout, "--idle-timeout", 0, MAX_IDLE_TIMEOUT_S, lo_open=True)
         check_number(self.max_upload, "--max-upload", 1024, MAX_UPLOAD_LIMIT, integer=True)
         check_number(self.quality, "--quality", 10, 100, integer=True)
+        check_number(self.max_clip_seconds, "--max-clip-seconds", 0, MAX_CLIP_LIMIT_S, lo_open=True)
+        check_number(self.job_timeout, "--job-timeout", 0, MAX_JOB_TIMEOUT_S, lo_open=True)
         if self.workers is not None:
             check_number(self.workers, "--workers", 1, MAX_WORKERS, integer=True)
         if self.fps not in FPS_CHOICES:
@@ -132,7 +140,8 @@ class LiveServer:
         self.executor = ThreadPoolExecutor(max_workers=workers, thread_name_prefix="lipsync-live")
         self.tmp = Path(tempfile.mkdtemp(prefix="lipsync-serve-"))
         self.jobs = Jobs(self.tmp, bank=self.bank, store=self.store, fps=config.fps, map=config.map,
-                         timing=config.timing, method=config.method)
+                         timing=config.timing, method=config.method, max_clip_seconds=config.max_clip_seconds,
+                         job_timeout=config.job_timeout)
         self.sessions: set = set()
         self.stats = {"frames": 0, "errors": 0, "sessions_total": 0, "refused_sessions": 0}
         self.app = Guard(self._routes(), session=session, max_body=config.max_upload,

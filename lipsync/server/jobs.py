@@ -5,17 +5,26 @@ there under a fixed name with the client's extension only (which picks the reade
 transcript (if any) beside it as a file -- a client's text is never taken as a path --,
 and :func:`lipsync.clip.render_clip` writes ``out.mp4`` there, atomically. Finished jobs
 are kept until :data:`MAX_KEPT` newer ones exist, then their folder is removed.
+
+Bounds (issue 32): a job longer than ``max_clip_seconds`` of video (a 16-byte timeline can
+say ten hours) fails before any frame, and one running longer than ``job_timeout`` seconds
+is stopped, so a queued job starts within ``(MAX_PENDING - 1) * job_timeout`` seconds
+whatever came before it. :meth:`Jobs.close` (SIGTERM, Ctrl-C) cancels the running job and
+returns within :data:`STOP_WAIT_S`: the render stops at its next frame (its ffmpeg killed,
+its partial output removed); the worker is a daemon thread, so even a job still aligning
+its audio does not hold the process.
 """
 
 from __future__ import annotations
 
+import queue
 import re
 import secrets
 import shutil
 import threading
+import time
 import types
 from collections import OrderedDict
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Optional
@@ -29,6 +38,16 @@ MAX_PENDING = 4
 MAX_KEPT = 16
 #: Longest transcript accepted with an audio upload (a few minutes of speech).
 MAX_TEXT_CHARS = 20_000
+
+#: Longest clip a job renders, seconds of video (``--max-clip-seconds``): ten minutes, far
+#: beyond a talking-head clip, and rendered in a few minutes even on two cores.
+DEFAULT_MAX_CLIP_S = 600.0
+#: Wall-clock seconds a job may run before it is stopped (``--job-timeout``): a ten-minute
+#: clip renders in about a minute on two cores (`lipsync render`: 5-12x real time).
+DEFAULT_JOB_TIMEOUT_S = 300.0
+#: How long :meth:`Jobs.close` waits for the cancelled job to unwind (ffmpeg killed, partial
+#: output removed) before the server goes on shutting down.
+STOP_WAIT_S = 1.0
 
 _EXTENSION = re.compile(r"^\.[A-Za-z0-9]{1,10}$")
 
@@ -51,12 +70,17 @@ class Job:
 class Jobs:
     """The render queue of one server (module docstring)."""
 
-    def __init__(self, root: Path, *, bank, store, fps: float, map, timing, method: str):
+    def __init__(self, root: Path, *, bank, store, fps: float, map, timing, method: str,
+                 max_clip_seconds: float = DEFAULT_MAX_CLIP_S, job_timeout: float = DEFAULT_JOB_TIMEOUT_S):
         self.root = root
         self.bank, self.store, self.fps, self.map, self.timing, self.method = bank, store, fps, map, timing, method
+        self.max_clip_seconds, self.job_timeout = float(max_clip_seconds), float(job_timeout)
         self._jobs: "OrderedDict[str, Job]" = OrderedDict()
         self._lock = threading.Lock()
-        self._executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="lipsync-render")
+        self._queue: "queue.Queue" = queue.Queue()
+        self._stop = threading.Event()
+        self._worker = threading.Thread(target=self._serve_queue, name="lipsync-render", daemon=True)
+        self._worker.start()
 
     def submit(self, data: bytes, name: str, *, text: Optional[str] = None, timeline_format: Optional[str] = None,
                fps: Optional[float] = None, lang: Optional[str] = None) -> Job:
@@ -99,22 +123,58 @@ class Jobs:
             transcript = folder / "transcript.txt"
             transcript.write_text(text, encoding="utf-8")
             options.text = str(transcript)
-        self._executor.submit(self._run, job, source, options, self.fps if fps is None else fps)
+        self._queue.put((job, source, options, self.fps if fps is None else fps))
         return job
+
+    def _serve_queue(self) -> None:
+        while not self._stop.is_set():
+            item = self._queue.get()
+            if item is None or self._stop.is_set():
+                break
+            self._run(*item)
+
+    def _clip(self, source: Path, options):
+        """What to render, after checking its length: a Timeline read here, or the audio path
+        (its decoded length checked before the long alignment)."""
+        from ..readers import read_timeline
+        from ..readers.audio import is_audio_input
+
+        if is_audio_input(source, options.timeline_format):
+            from ..speech.audio import SAMPLE_RATE, load_audio
+
+            # decoded (a header's duration can lie), and no further than just past the limit
+            seconds = len(load_audio(source, max_seconds=self.max_clip_seconds + 1)) / SAMPLE_RATE
+            clip, length = str(source), f"more than {self.max_clip_seconds:g} s"
+        else:
+            clip = read_timeline(source, options.timeline_format, tier=options.tier, sample_rate=options.sample_rate,
+                                 fps=options.moho_fps)
+            seconds = clip.end
+            length = f"{seconds:.0f} s"
+        if seconds > self.max_clip_seconds:
+            raise InputError(f"lasts {length}; this server renders at most {self.max_clip_seconds:g} s per job "
+                             f"(--max-clip-seconds)", path=source)
+        return clip
 
     def _run(self, job: Job, source: Path, options, fps: float) -> None:
         from ..clip import render_clip
 
         job.state = "running"
+        deadline = time.monotonic() + self.job_timeout
 
         def progress(done: int, total: int) -> None:
             job.progress, job.frames = done / max(total, 1), done
+            if self._stop.is_set():
+                raise Stopped("the server is shutting down")
+            if time.monotonic() > deadline:
+                raise Stopped(f"stopped after {self.job_timeout:g} s (--job-timeout)")
 
         try:
-            render_clip(str(source), str(job.folder / "out.mp4"), bank=self.bank, store=self.store, fps=fps,
-                        map=self.map, timing=self.timing, method=self.method, quiet=True,
+            render_clip(self._clip(source, options), str(job.folder / "out.mp4"), bank=self.bank, store=self.store,
+                        fps=fps, map=self.map, timing=self.timing, method=self.method, quiet=True,
                         timeline_options=options, progress=progress)
             job.state, job.progress = "done", 1.0
+        except Stopped as exc:
+            job.error, job.state = str(exc), "error"
         except InputError as exc:
             # the server's paths mean nothing to the client: name its upload instead
             job.error = str(exc).replace(str(source), job.name).replace(str(job.folder), "")
@@ -138,8 +198,15 @@ class Jobs:
             shutil.rmtree(job.folder, ignore_errors=True)
 
     def close(self) -> None:
-        self._executor.shutdown(wait=True, cancel_futures=True)
+        """Cancel the running job and drop the queued ones; returns within :data:`STOP_WAIT_S`."""
+        self._stop.set()
+        self._queue.put(None)
+        self._worker.join(STOP_WAIT_S)
 
 
 class Busy(RuntimeError):
     """Too many jobs pending (HTTP 503)."""
+
+
+class Stopped(RuntimeError):
+    """A job cancelled: over its time, or the server stopping."""

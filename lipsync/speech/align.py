@@ -1046,6 +1046,9 @@ def _align_pcm(pcm: np.ndarray, transcript: Tuple[str, ...], *, quiet: bool, pat
     has_text = bool(transcript)  # blank or punctuation only: no words, so recognise
     energy = _frame_energy(pcm)
     if len(energy) == 0 or float(energy.max()) < SILENCE_DBFS:
+        if has_text:  # never dropped without a word (issue 32)
+            warnings.warn(f"{path or 'audio'}: the audio is silent; the transcript was not used", AlignmentWarning,
+                          stacklevel=2)
         return Alignment(_timeline((), duration, path), _timeline((), duration, path), duration,
                          transcript=transcript, recognised=not has_text, missing=missing)
     pcm = _dither(pcm)

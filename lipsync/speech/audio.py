@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import os
 import subprocess
-from typing import Union
+from typing import Optional, Union
 
 import numpy as np
 
@@ -54,7 +54,7 @@ def _ffmpeg_exe() -> str:
     return imageio_ffmpeg.get_ffmpeg_exe()
 
 
-def load_audio(path: PathLike, *, sample_rate: int = SAMPLE_RATE) -> np.ndarray:
+def load_audio(path: PathLike, *, sample_rate: int = SAMPLE_RATE, max_seconds: Optional[float] = None) -> np.ndarray:
     """Decode an audio file to mono 16-bit samples at ``sample_rate``.
 
     Parameters
@@ -63,6 +63,8 @@ def load_audio(path: PathLike, *, sample_rate: int = SAMPLE_RATE) -> np.ndarray:
         Any file ffmpeg can read an audio stream from.
     sample_rate : int
         Output rate in Hz (default 16000, the acoustic model's rate).
+    max_seconds : float, optional
+        Decode no further than this (a server checking an upload's length).
 
     Returns
     -------
@@ -89,8 +91,11 @@ def load_audio(path: PathLike, *, sample_rate: int = SAMPLE_RATE) -> np.ndarray:
         raise AudioError("no such file", path=name)
     if os.path.isdir(name):
         raise AudioError("is a folder, not an audio file", path=name)
-    cmd = [_ffmpeg_exe(), "-nostdin", "-v", "error", "-i", name, "-map", "0:a:0", "-vn", "-sn", "-dn",
-           "-ac", "1", "-ar", str(int(sample_rate)), "-f", "s16le", "-acodec", "pcm_s16le", "-"]
+    from .._media import input_args, refused, REFUSED_TEXT
+
+    cmd = [_ffmpeg_exe(), "-nostdin", "-v", "error", *input_args(name), "-map", "0:a:0", "-vn", "-sn", "-dn",
+           "-ac", "1", "-ar", str(int(sample_rate)), "-f", "s16le", "-acodec", "pcm_s16le"]
+    cmd += ["-t", f"{float(max_seconds):.3f}", "-"] if max_seconds is not None else ["-"]
     try:
         proc = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, check=False)
     except OSError as exc:  # ffmpeg itself not runnable: the environment, not the file
@@ -100,6 +105,8 @@ def load_audio(path: PathLike, *, sample_rate: int = SAMPLE_RATE) -> np.ndarray:
         said = full[-_STDERR_TAIL:].splitlines()[-1] if full else f"ffmpeg exit status {proc.returncode}"
         if "matches no streams" in full:  # a video without sound, an image, ...
             said = "no audio stream"
+        if refused(full):  # a playlist, a concat list, ...: see lipsync._media
+            raise AudioError(REFUSED_TEXT, path=name)
         raise AudioError(f"cannot read as audio ({said})", path=name)
     data = proc.stdout
     return np.frombuffer(data[: len(data) // 2 * 2], dtype="<i2").astype(np.int16, copy=False)

@@ -50,8 +50,9 @@ def warp_frame(image: np.ndarray, matrix: np.ndarray, size: Tuple[int, int]) -> 
                           borderMode=cv2.BORDER_REPLICATE)
 
 
-def grab_frames(path, frames) -> Dict[int, np.ndarray]:
-    """Frame index → the decoded frame, for the indices in ``frames`` (read-only arrays).
+def grab_frames(path, frames, info=None) -> Dict[int, np.ndarray]:
+    """Frame index → the decoded frame, for the indices in ``frames`` (read-only arrays;
+    turned upright as ``info``, the video's :class:`~lipsync.face.video.VideoInfo`, says).
 
     Raises
     ------
@@ -63,7 +64,7 @@ def grab_frames(path, frames) -> Dict[int, np.ndarray]:
     frames = set(frames)
     out: Dict[int, np.ndarray] = {}
     last = max(frames) if frames else -1
-    for i, frame in enumerate(read_video(path)):
+    for i, frame in enumerate(read_video(path, info=info)):
         if i in frames:
             out[i] = frame
         if i >= last:

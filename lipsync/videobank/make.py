@@ -169,10 +169,10 @@ def make_bank(outdir: PathLike, videos: Sequence[PathLike], *, text: Optional[st
     >>> import tempfile, pathlib
     >>> out = pathlib.Path(tempfile.mkdtemp())
     >>> _ = (out / "notes.txt").write_text("mine")
-    >>> make_bank(out, ["talk.mp4"])      # checked before any work is done
+    >>> make_bank(out, ["talk.mp4"], force=True)      # checked before any work is done
     Traceback (most recent call last):
     ...
-    lipsync.errors.InputError: ...: is not empty; use --force to replace what is there with the new bank
+    lipsync.errors.InputError: ...: is not empty and is not a bank (no bank.yaml); --force replaces only a bank: give a new or empty folder
 
     With the three GRID clips in ``tests/data/grid-s1`` (about 10 s on two cores)::
 
@@ -189,7 +189,9 @@ def make_bank(outdir: PathLike, videos: Sequence[PathLike], *, text: Optional[st
     from ..phonemes import load_map
     from .sources import find_sources
 
-    write.check_outdir(outdir, cfg.force)
+    inputs = _inputs(videos, text)
+    write.check_outdir(outdir, cfg.force, inputs)
+    write.check_writable(outdir)
     seconds: Dict[str, float] = {}
     t0 = time.perf_counter()
     pmap = load_map(cfg.map)
@@ -216,7 +218,40 @@ def make_bank(outdir: PathLike, videos: Sequence[PathLike], *, text: Optional[st
     pictures = cut_and_choose(footage, {v: r[:select.FINALISTS] for v, r in ranked.items()}, cfg,
                               plate=pmap.silence if cfg.one_face else None)
     seconds["cut"] = time.perf_counter() - t
-    return assemble(outdir, footage, ranked, pictures, pmap, cfg, seconds)
+    return assemble(outdir, footage, ranked, pictures, pmap, cfg, seconds, inputs=inputs)
+
+
+#: Narrowest picture, in eye distances, in which the face room still finds the face: crops
+#: of bank pictures (init --video of bbwm5s.mpg, 46 px between the eyes) centred on the face
+#: were found down to 1.5 eye distances wide (lip points within 0.023 eye distances of the
+#: whole picture's), and 2 of 3 were not at 1.2. A head at the frame's edge gave 40x234.
+MIN_PICTURE_EYE_DISTANCES = 1.5
+
+
+def _check_trackable(names: str, w: int, h: int, scale: float) -> None:
+    """Refuse a bank the face room could not find the face in again (editor, dub, init DIR)."""
+    from .sources import MIN_EYE_DISTANCE_PX
+
+    if scale < MIN_EYE_DISTANCE_PX:
+        raise InputError(f"the bank's pictures ({w}x{h}) would have {scale:.0f} px between the eyes; at least "
+                         f"{MIN_EYE_DISTANCE_PX:g} are needed to place the lips (a larger --size)", path=names)
+    if min(w, h) < MIN_PICTURE_EYE_DISTANCES * scale:
+        raise InputError(f"the face is cut: the bank's pictures would be {w}x{h} px, {min(w, h) / scale:.1f} eye "
+                         f"distances across, and the face needs {MIN_PICTURE_EYE_DISTANCES:g} (keep the whole head "
+                         f"in view)", path=names)
+
+
+def _lips_inside(points: np.ndarray, w: int, h: int) -> bool:
+    """Whether the outer lip contour of ``points`` lies inside a ``w`` x ``h`` picture."""
+    from ..face import topology as T
+
+    lips = np.asarray(points)[list(T.LIP_OUTER_UPPER + T.LIP_OUTER_LOWER), :2]
+    return bool((lips >= 0).all() and (lips[:, 0] <= w - 1).all() and (lips[:, 1] <= h - 1).all())
+
+
+def _inputs(videos: Sequence[PathLike], text: Optional[str]) -> List[PathLike]:
+    """The files a bank is made from (the bank's folder may not hold them)."""
+    return list(videos) + ([text] if text is not None and os.path.isfile(text) else [])
 
 
 def _candidates(footage: Footage, rest: str) -> List[Candidate]:
@@ -300,7 +335,7 @@ def cut_and_choose(footage: Footage, finalists: Dict[str, List[Candidate]], cfg:
         for i, s in enumerate(src):
             wanted = sorted({c.frame for c in cands if c.video == i})
             got = {f: raw[(i, f)] for f in wanted} if all((i, f) in raw for f in wanted) else (
-                grab_frames(s.path, wanted) if wanted else {})
+                grab_frames(s.path, wanted, info=s.info) if wanted else {})
             for f, img in got.items():
                 if keep:
                     raw[(i, f)] = img
@@ -314,6 +349,15 @@ def cut_and_choose(footage: Footage, finalists: Dict[str, List[Candidate]], cfg:
     w, h = frame.size
     raw: Dict[tuple, np.ndarray] = {}
     keep = sum(int(np.prod(src[c.video].info.size)) * 3 for c in flat) <= RAW_BUDGET_BYTES
+    # a frame that cuts the face can leave the mouth out of the picture (no sharpness to
+    # measure, lines off the picture): such finalists are dropped, or the footage refused
+    inside = {(c.video, c.frame): _lips_inside(points(frame, c), w, h) for c in flat}
+    if sum(inside.values()) < len(inside) / 2 or not all(any(inside[(c.video, c.frame)] for c in fs)
+                                                         for fs in finalists.values()):
+        raise InputError(f"the mouth is outside the picture in {len(inside) - sum(inside.values())} of the "
+                         f"{len(inside)} frames chosen from: the frame cuts the face (keep the whole head in view)",
+                         path=footage.names)
+    finalists = {v: [c for c in fs if inside[(c.video, c.frame)]] for v, fs in finalists.items()}
     images = cut(frame, flat, raw, keep)
     chosen: Dict[str, Candidate] = {}
     for v, fs in finalists.items():
@@ -349,7 +393,7 @@ def _compose(first: np.ndarray, m: np.ndarray) -> np.ndarray:
 
 
 def assemble(outdir: Path, footage: Footage, ranked: Dict[str, List[Candidate]], pictures: Pictures, pmap,
-             cfg: VideoBankConfig, seconds: Dict[str, float]) -> VideoBankResult:
+             cfg: VideoBankConfig, seconds: Dict[str, float], inputs: Sequence[PathLike] = ()) -> VideoBankResult:
     """Borrow shapes for visemes never shown, match the colour, place the lines, and write
     the bank (PNGs, bank.yaml, report, preview, flows) all at once."""
     from ..bank import Bank
@@ -360,6 +404,7 @@ def assemble(outdir: Path, footage: Footage, ranked: Dict[str, List[Candidate]],
     t = time.perf_counter()
     names, chosen, frame = footage.names, pictures.chosen, pictures.framing
     w, h = frame.size
+    _check_trackable(names, w, h, frame.scale)
     order = _viseme_order(pmap)
     shown = [v for v in order if v in chosen]
     missing = {v: select.nearest_available(v, shown, fallback=pmap.fallback) for v in order if v not in chosen}
@@ -437,7 +482,7 @@ def assemble(outdir: Path, footage: Footage, ranked: Dict[str, List[Candidate]],
 
     header = [f"# Written by lipsync init --video from {len(footage.sources)} video(s) ({names[:200]}): one "
               f"frame per viseme, lines placed from the face; the choice is in {write.REPORT_NAME}."]
-    with write.Staging(outdir, force=cfg.force) as tmp:
+    with write.Staging(outdir, force=cfg.force, inputs=inputs) as tmp:
         t = time.perf_counter()
         images = {}
         for v in order:

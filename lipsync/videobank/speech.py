@@ -23,6 +23,7 @@ import warnings
 from dataclasses import dataclass
 from typing import List, Optional, Tuple
 
+from ..errors import InputError
 from ..phonemes import PhonemeMap, map_timeline
 from ..timeline import Segment, Timeline
 from .sources import Source
@@ -88,6 +89,11 @@ def transcribe(source: Source, pmap: PhonemeMap, *, quiet: bool = True, jobs: Op
     from ..speech.align import align
 
     al = align(source.path, source.text, quiet=quiet, jobs=jobs, lang=lang)
+    if len(al.words) == 0:
+        # a silent track gave an empty alignment (and nine copies of the rest shape)
+        dropped = f"; the transcript ({source.text_from}) could not be used" if source.text else ""
+        raise InputError(f"its sound track has no speech (silent, or too quiet to hear){dropped}: the speech is "
+                         f"what tells which mouth shape each frame shows (record with sound)", path=source.path)
     phones = Timeline(tuple(al.phones), kind=al.phones.kind, path=str(source.path), stated_end=al.duration)
     return Speech(source=source, words=tuple(al.words.labels()), phones=phones,
                   visemes=viseme_spans(phones, pmap), recognised=al.recognised, confidence=al.confidence)

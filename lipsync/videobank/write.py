@@ -19,17 +19,18 @@ Examples
 
 from __future__ import annotations
 
+import errno
 import json
 import os
 import re
 import shutil
 import tempfile
 from pathlib import Path
-from typing import Dict, List, Mapping, Optional
+from typing import Dict, List, Mapping, Optional, Sequence
 
 import numpy as np
 
-from ..errors import InputError
+from ..errors import InputError, PathLike
 
 #: The report and the preview sheet, written beside bank.yaml.
 REPORT_NAME = "init-report.json"
@@ -40,52 +41,158 @@ PREVIEW_TILE = 320
 _SAFE_NAME = re.compile(r"[A-Za-z0-9_-]{1,64}")
 
 
-def check_outdir(outdir: Path, force: bool) -> None:
-    """Refuse an output that is a file, or a non-empty folder without ``force`` (before any work)."""
+def check_outdir(outdir: Path, force: bool, inputs: Sequence[PathLike] = ()) -> None:
+    """Refuse, before any work, an ``outdir`` the new bank may not replace.
+
+    The bank replaces the whole folder, so: never the current folder or one holding it,
+    nor a folder holding one of ``inputs`` (the videos and transcripts it is made from); a
+    file; a non-empty folder without ``force``; and with ``force`` only a folder that is a
+    bank (has ``bank.yaml``) -- never anyone's other files.
+    """
+    try:
+        _check_outdir(outdir, force, inputs)
+    except OSError as exc:  # a name too long, a file on the path, no permission to look
+        raise write_error(exc, outdir) from None
+
+
+def _check_outdir(outdir: Path, force: bool, inputs: Sequence[PathLike]) -> None:
     if outdir.exists() and not outdir.is_dir():
         raise InputError("exists and is not a folder", path=outdir)
-    if outdir.is_dir() and any(outdir.iterdir()) and not force:
-        raise InputError("is not empty; use --force to replace what is there with the new bank", path=outdir)
+    where = _resolved(outdir)
+    here = _resolved(Path.cwd())
+    if where == here or where in here.parents:
+        raise InputError("is the current folder (or holds it); the bank replaces the whole folder: give a new "
+                         "folder's name", path=outdir)
+    for item in inputs:
+        p = _resolved(Path(os.fspath(item)))
+        if p == where or where in p.parents:
+            raise InputError(f"holds {item}, an input of this bank; the bank replaces the whole folder: give "
+                             f"another folder", path=outdir)
+    if outdir.is_dir() and any(outdir.iterdir()):
+        if not (outdir / "bank.yaml").is_file():
+            raise InputError("is not empty and is not a bank (no bank.yaml); --force replaces only a bank: give a "
+                             "new or empty folder", path=outdir)
+        if not force:
+            raise InputError("holds a bank; use --force to replace it with the new bank", path=outdir)
+
+
+def _resolved(p: Path) -> Path:
+    try:
+        return p.resolve()
+    except (OSError, RuntimeError):  # a symlink loop: compare it as written
+        return Path(os.path.abspath(p))
+
+
+#: Why the bank could not be written, by errno, in words a user can act on (each also
+#: names OUT, never the hidden staging folder the OS named).
+_WRITE_ERRORS = {
+    errno.ENOSPC: "the disk is full",
+    errno.EDQUOT: "the disk quota is used up",
+    errno.EROFS: "the file system is read-only",
+    errno.EACCES: "no permission to write there",
+    errno.EPERM: "no permission to write there",
+    errno.EEXIST: "a file stands where a folder on its path must be",
+    errno.ENOTDIR: "a file stands where a folder on its path must be",
+    errno.ENAMETOOLONG: "the name is too long for the file system",
+}
+
+
+def write_error(exc: OSError, outdir: Path) -> Exception:
+    """``exc`` as an error naming ``outdir``: an InputError (exit 2) for the errnos of
+    :data:`_WRITE_ERRORS`, else an OSError naming ``outdir``.
+
+    Examples
+    --------
+    >>> str(write_error(OSError(28, "No space left on device", "/x/.me.partial-1-ab/C.png"), Path("me")))
+    'me: cannot write the bank: the disk is full (nothing was written)'
+    """
+    reason = _WRITE_ERRORS.get(exc.errno)
+    if reason is None:
+        return type(exc)(exc.errno, f"cannot write the bank {outdir}: {exc.strerror or exc}")
+    return InputError(f"cannot write the bank: {reason} (nothing was written)", path=outdir)
+
+
+def check_writable(outdir: Path) -> None:
+    """Before any work: remove what killed runs left beside ``outdir`` and prove a staging
+    folder can be made there (read-only disks, a file in the path, a name too long fail now,
+    not after minutes of work). Folders made for the proof are removed again: a run that
+    fails later leaves nothing."""
+    missing = []
+    parent = _resolved(Path(outdir)).parent
+    while not parent.exists() and parent != parent.parent:
+        missing.append(parent)
+        parent = parent.parent
+    try:
+        os.rmdir(Staging(outdir)._make_tmp())
+    finally:
+        for folder in missing:  # deepest first
+            try:
+                folder.rmdir()
+            except OSError:
+                pass
 
 
 class Staging:
-    """A temporary folder beside ``outdir`` that becomes ``outdir`` when the block succeeds."""
+    """A temporary folder beside ``outdir`` that becomes ``outdir`` when the block succeeds.
 
-    def __init__(self, outdir: Path, *, force: bool = False):
+    Named ``.OUT.partial-PID-XXXX`` (:func:`lipsync._files.partial_name`), so the next run
+    removes it if this process is killed (:func:`lipsync._files.remove_stale_partials`);
+    the previous bank moved aside by ``--force`` is ``.OUT.old-PID-XXXX``, removed the same
+    way once OUT exists again. Errors name OUT (:func:`write_error`).
+    """
+
+    def __init__(self, outdir: Path, *, force: bool = False, inputs: Sequence[PathLike] = ()):
         self.outdir = Path(outdir)
         self.force = force
+        self.inputs = tuple(inputs)
         self.tmp: Optional[Path] = None
 
-    def __enter__(self) -> Path:
-        check_outdir(self.outdir, self.force)
-        parent = self.outdir.resolve().parent
-        parent.mkdir(parents=True, exist_ok=True)
-        self.tmp = Path(tempfile.mkdtemp(prefix=f".{self.outdir.name}.tmp-", dir=parent))
-        os.chmod(self.tmp, 0o755)  # mkdtemp's folder is private; a bank is meant to be shared
+    def _make_tmp(self) -> Path:
+        from .._files import partial_name, remove_stale_partials
+
+        where = _resolved(self.outdir)
+        try:
+            where.parent.mkdir(parents=True, exist_ok=True)
+            remove_stale_partials(where)
+            if where.is_dir():  # a killed --force run had put the new bank in place
+                remove_stale_partials(where, ("old",))
+            self.tmp = Path(tempfile.mkdtemp(prefix=partial_name(where) + "-", dir=where.parent))
+            os.chmod(self.tmp, 0o755)  # mkdtemp's folder is private; a bank is meant to be shared
+        except OSError as exc:
+            raise write_error(exc, self.outdir) from None
         return self.tmp
+
+    def __enter__(self) -> Path:
+        check_outdir(self.outdir, self.force, self.inputs)
+        return self._make_tmp()
 
     def __exit__(self, exc_type, exc, tb) -> bool:
         assert self.tmp is not None
         if exc_type is not None:
             shutil.rmtree(self.tmp, ignore_errors=True)
+            if isinstance(exc, OSError):
+                raise write_error(exc, self.outdir) from None
             return False
         try:
             self._commit()
-        except BaseException:
+        except BaseException as failed:
             shutil.rmtree(self.tmp, ignore_errors=True)
+            if isinstance(failed, OSError):
+                raise write_error(failed, self.outdir) from None
             raise
         return False
 
     def _commit(self) -> None:
-        check_outdir(self.outdir, self.force)  # again: it may have changed meanwhile
+        check_outdir(self.outdir, self.force, self.inputs)  # again: it may have changed meanwhile
+        outdir = _resolved(self.outdir)
         old = None
-        if self.outdir.is_dir():
-            if any(self.outdir.iterdir()):
-                old = Path(tempfile.mkdtemp(prefix=f".{self.outdir.name}.old-", dir=self.tmp.parent))
-                os.rename(self.outdir, old / "bank")
+        if outdir.is_dir():
+            if any(outdir.iterdir()):
+                old = Path(tempfile.mkdtemp(prefix=f".{outdir.name}.old-{os.getpid()}-", dir=self.tmp.parent))
+                os.rename(outdir, old / "bank")
             else:
-                self.outdir.rmdir()
-        os.rename(self.tmp, self.outdir)
+                outdir.rmdir()
+        os.rename(self.tmp, outdir)
         if old is not None:
             shutil.rmtree(old, ignore_errors=True)
 
