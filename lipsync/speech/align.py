@@ -783,8 +783,9 @@ def _voiced_loop(segs: Sequence[Tuple[str, int, int]], pcm: np.ndarray) -> List[
     voice gate.
 
     The gate (as live audio's, :class:`~lipsync.speech.voice.VoiceGate`) changed the
-    synthetic figure by nothing (espeak-ng's pauses are silent) and the real recordings'
-    agreement with their transcript-aligned mouth from 0.622 to 0.626.
+    synthetic figure by nothing (espeak-ng's pauses are digital silence) and the real
+    recordings' agreement with their transcript-aligned mouth by less than 0.005; it is kept
+    because it rests the mouth on breath and noise between phrases, as live audio does.
     """
     from .voice import VoiceGate
 
