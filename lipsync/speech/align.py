@@ -733,7 +733,7 @@ def _even_phones(word: str, start: int, end: int) -> _WordTiming:
 LOOP_CLOSURE_MAX_FRAMES = 20
 #: ... through which the voice goes on (at least this share of its frames voiced, by
 #: :class:`~lipsync.speech.voice.VoiceGate`: the murmur of an m, the voice bar of a b) ...
-LOOP_CLOSURE_VOICED = 0.3
+LOOP_CLOSURE_VOICED = 0.1
 #: ... and which is quieter (mean dBFS) than both phones around it by at least this, is a lip
 #: closure and becomes the loop's M. The en-us loop hears the quiet murmur of a bilabial nasal
 #: or voiced stop as silence; a t or k closure is silent (unvoiced), so it stays a pause.
@@ -742,17 +742,24 @@ LOOP_CLOSURE_VOICED = 0.3
 #: more, bilabials shown closed) and on the six real recordings (mouth without the transcript
 #: against the mouth with it; the Mandarin clip's against its TextGrid phones):
 #:
-#: ======================================== ===== ===== ========= ===== ===========
-#: short pauses made M                      mean  >=.5  bilabials real  zh TextGrid
-#: ======================================== ===== ===== ========= ===== ===========
-#: none                                     0.470 7/20  0.32      0.622 0.559
-#: every one up to 20 frames                0.507 13/20 0.58      0.603
-#: voiced (0.3)                             0.502 13/20 0.53      0.618 0.529
-#: voiced and quieter (0 dB: used)          0.494 12/20 0.48      0.622 0.559
-#: voiced and 3 / 6 / 10 dB quieter         0.489 / 0.484 / 0.480 (8, 8, 7 of 20)
-#: ======================================== ===== ===== ========= ===== ===========
+#: ========================================== ===== ===== ========= ===== ===========
+#: short pauses made M                        mean  >=.5  bilabials real  zh TextGrid
+#: ========================================== ===== ===== ========= ===== ===========
+#: none                                       0.470 7/20  0.32      0.622 0.559
+#: every one up to 20 frames                  0.507 13/20 0.58      0.603
+#: voiced (0.3)                               0.502 13/20 0.53      0.618 0.529
+#: voiced (0.3) and quieter (0 dB)            0.494 12/20 0.48      0.622 0.559
+#: voiced (0.3) and 3 / 6 / 10 dB quieter     0.489 / 0.484 / 0.480 (8, 8, 7 of 20)
+#: with voiced pauses shared (``_close_voiced_pauses`` of :mod:`lipsync.speech.languages`):
+#: voiced (0.3) and quieter (0 dB)            0.509 13/20 0.48      0.622 0.559
+#: voiced (0.1) and quieter (0 dB): used      0.512 13/20 0.52      0.622 0.559
+#: voiced (0.1), up to 6 / 10 dB louder       0.512 / 0.512, bilabials 0.55 / 0.56; real 0.622 / 0.618
+#: ========================================== ===== ===== ========= ===== ===========
 #:
-#: So the closure rule helps synthetic speech and leaves the real recordings as they were.
+#: Turning every short pause into M scored best on espeak-ng's voices but cost the real
+#: recordings; so did a pause up to 10 dB louder than its neighbours (the Mandarin clip
+#: 0.559 -> 0.529). The rule used helps synthetic speech and leaves the real recordings as
+#: they were.
 LOOP_CLOSURE_QUIETER_DB = 0.0
 
 
