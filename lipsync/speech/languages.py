@@ -251,7 +251,9 @@ def align_language(pcm, text: Optional[str], lang: str, *, quiet: bool = True, p
     finally:
         A._WIDE.reset(token)
     out = _in_ipa(al, plans, unread)
-    return replace(out, phones=_close_voiced_pauses(out.phones, pcm))
+    voiced = _voiced_frames(pcm)
+    # words too, so that each phone stays inside its word (their edges are the same times)
+    return replace(out, words=_close_voiced_pauses(out.words, voiced), phones=_close_voiced_pauses(out.phones, voiced))
 
 
 #: A pause between two aligned phones at most this long (seconds) ...
@@ -270,14 +272,20 @@ VOICED_PAUSE_MAX_S = 0.3
 VOICED_PAUSE_SHARE = 0.3
 
 
-def _close_voiced_pauses(phones: Timeline, pcm: np.ndarray) -> Timeline:
-    """``phones`` with each short voiced pause between two phones shared by them
-    (:data:`VOICED_PAUSE_MAX_S`)."""
-    from .voice import FRAME_S, VoiceGate
+def _voiced_frames(pcm: np.ndarray) -> np.ndarray:
+    """Per 10 ms frame of 16 kHz ``pcm``: voiced (:class:`~lipsync.speech.voice.VoiceGate`)."""
+    from .voice import VoiceGate
 
     gate = VoiceGate()
     gate.feed(pcm)
-    voiced = np.asarray(gate.voiced, bool)
+    return np.asarray(gate.voiced, bool)
+
+
+def _close_voiced_pauses(phones: Timeline, voiced: np.ndarray) -> Timeline:
+    """``phones`` (or words) with each short voiced pause between two of them shared by them
+    (:data:`VOICED_PAUSE_MAX_S`); ``voiced``: :func:`_voiced_frames`."""
+    from .voice import FRAME_S
+
     out: List[Segment] = []
     for seg in phones:
         if out:
