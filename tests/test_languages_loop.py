@@ -122,6 +122,8 @@ def test_with_the_transcript_every_phone_stays_inside_its_word():
         assert any(w.start - 1e-6 <= p.start and p.end <= w.end + 1e-6 for w in al.words), p
     # espeak-ng says "met de" without a pause (its t runs into d); the aligner's pause there
     # lies on voiced sound, so it was given back: the two words touch
-    assert all(abs(b - a2) < 1e-6 for (_, b, _), (a2, _, _) in zip(truth, truth[1:]) if 1.04 < b < 1.3)
+    labels = [label for *_, label in truth]
+    i = next(k for k in range(len(labels)) if labels[k:k + 4] == ["m", "ɛ", "t", "ə"])
+    assert all(abs(truth[k][1] - truth[k + 1][0]) < 1e-6 for k in range(i, i + 4))
     met, de = al.words[4], al.words[5]
     assert (met.label, de.label) == ("met", "de") and met.end == de.start
