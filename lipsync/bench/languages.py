@@ -16,8 +16,9 @@ closures, so a figure's counts are in its row):
   :data:`~lipsync.speech.align.BOUNDARY_OFFSET_OTHER_S`), and the share of the truth's
   bilabial stops and nasals shown closed: a frame of the video as the renderer's sequencer
   plans it (which keeps every closure on at least one frame), within the phone widened by
-  half a frame each side, shows the closed mouth (more than half way through a morph); alignment speed as a
-  multiple of real time on one core (``jobs=1``, CPU time of this process);
+  half a frame each side, shows the closed mouth (more than half way through a morph);
+  alignment speed as a multiple of real time on one core (``jobs=1``, CPU time of this
+  process); the lowest confidence of its sentences;
 * without the transcript (the free phone loop): the same two shares.
 
 ``languages-real`` -- the six real recordings of ``../shared/languages`` (Japanese, Spanish,
@@ -51,13 +52,13 @@ FPS = 25.0
 #: when either neighbouring frame shows it.
 BILABIAL_SLACK_S = 0.5 / FPS
 
-#: (BCP 47 tag, script, sentences): for each of 20 languages, four or five everyday sentences written
-#: for this bench as a native speaker would say them (one with a number written as digits,
-#: read by espeak-ng). Each has several bilabial stops and nasals, and together they vary the
-#: phone content: the first is the original single sentence; the second leans on labiodentals
-#: and rounded vowels, the third on word-initial bilabials among open vowels, the fourth on
-#: clusters (pl, bl, mb, mp) and front vowels, so that each language's figure rests on about
-#: 10 s of speech (a fifth sentence where four gave less) and at least 15 lip closures (counted in the figure's rows).
+#: (BCP 47 tag, script, sentences): everyday sentences written for this bench as a native
+#: speaker would write them, each with bilabial stops and nasals. The first of each language
+#: is round four's single sentence (Indonesian's has a number as digits, read by espeak-ng);
+#: the others (round five) use other words and sounds (f and v, rounded vowels, clusters such
+#: as pl, bl, mb where the language has them), so that each language's figure rests on at
+#: least 10 s of speech and 15 lip closures (counted in the figure's rows); French, Dutch,
+#: Vietnamese and Russian, shorter to say, have a fifth.
 SENTENCES: Tuple[Tuple[str, str, Tuple[str, ...]], ...] = (
     ("fr", "Latin", ("Le petit bateau bleu passe sous le pont de pierre.",
                      "Ma mère boit un bon café au lait chaque matin avant de partir.",
