@@ -127,3 +127,11 @@ def test_with_the_transcript_every_phone_stays_inside_its_word():
     assert all(abs(truth[k][1] - truth[k + 1][0]) < 1e-6 for k in range(i, i + 4))
     met, de = al.words[4], al.words[5]
     assert (met.label, de.label) == ("met", "de") and met.end == de.start
+
+
+def test_a_lowered_e_is_aligned_as_eh_and_a_plain_e_as_ey():
+    # e̞ (a true mid vowel: espeak-ng's Japanese e) sits between e and ɛ; measured nearer EH
+    from lipsync.phonetics import english_phones
+
+    assert english_phones("e̞") == english_phones("ɛ") == ("EH",)
+    assert english_phones("e") == ("EY",) and english_phones("o̞") == english_phones("o") == ("OW",)
