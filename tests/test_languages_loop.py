@@ -5,6 +5,7 @@
   stays a pause; phones where the voice gate is shut (noise, no voice) are dropped;
 * with a transcript: a short voiced pause between two aligned phones is shared by them,
   a silent one is kept;
+* a lowered e (e̞) gets the en-us unit EH, a plain e EY (measured on the bench);
 * each language of the ``languages`` figure rests on at least 10 s of speech and 15 lip
   closures, counted from espeak-ng's own phoneme events.
 
