@@ -552,7 +552,7 @@ def synthesise(text: str, lang: str) -> Tuple[np.ndarray, List[Tuple[float, floa
             continue
         if label and nxt > sample / SYNTH_RATE:
             start = sample / SYNTH_RATE
-            if label[0] in _UNVOICED_STOPS:
+            if label[0] in _CLOSURE_STOPS:
                 floor = int(round(phonemes[-1][0] * SYNTH_RATE)) if phonemes else 0
                 floor = max(floor, sample - int(_CLOSURE_MAX_S * SYNTH_RATE))
                 closure = _closure_start(pcm, sample, floor)
@@ -574,6 +574,11 @@ def synthesise(text: str, lang: str) -> Tuple[np.ndarray, List[Tuple[float, floa
 #: closes for the closure. Voiced stops are reported at their closure (their voice bar
 #: starts at the event).
 _UNVOICED_STOPS = frozenset("ptkqcʈʔ")
+#: Stops whose event may come after a silent closure: the unvoiced ones, and voiced ones where
+#: a voice had no bar (Vietnamese b, an implosive, is reported 20-30 ms after a run of
+#: digital silence that is its closure). A voiced stop reported at its closure has no silent
+#: run ending at its event, so nothing moves.
+_CLOSURE_STOPS = _UNVOICED_STOPS | frozenset("bdɡgɟɖɢɓɗ")
 #: Shortest run of digital silence taken as a closure (shorter runs are waveform zero
 #: crossings), and how far before the event the run may end.
 _CLOSURE_MIN_S, _CLOSURE_SLACK_S = 0.005, 0.003
