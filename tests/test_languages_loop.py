@@ -6,6 +6,7 @@
 * with a transcript: a short voiced pause between two aligned phones is shared by them,
   a silent one is kept;
 * a lowered e (e̞) gets the en-us unit EH, a plain e EY (measured on the bench);
+* the truth: a voiced stop espeak-ng reports after a silent closure starts at the closure;
 * each language of the ``languages`` figure rests on at least 10 s of speech and 15 lip
   closures, counted from espeak-ng's own phoneme events.
 
@@ -136,3 +137,19 @@ def test_a_lowered_e_is_aligned_as_eh_and_a_plain_e_as_ey():
 
     assert english_phones("e̞") == english_phones("ɛ") == ("EH",)
     assert english_phones("e") == ("EY",) and english_phones("o̞") == english_phones("o") == ("OW",)
+
+
+def test_a_voiced_stop_after_a_silent_closure_gets_its_closure_in_the_truth():
+    # espeak-ng's Vietnamese b (an implosive) is reported 20-30 ms after a run of digital
+    # silence, its closure: the truth's b starts at that silence and follows its vowel
+    pytest.importorskip("espeakng_loader")
+    from lipsync.phonetics.g2p import SYNTH_RATE, synthesise
+
+    pcm, phonemes = synthesise("Em bé ăn phở bò với mẹ ở bên bờ biển.", "vi")
+    inner = [k for k, (*_, label) in enumerate(phonemes) if label == "b" and k > 0]
+    assert len(inner) >= 4
+    for k in inner:
+        start = phonemes[k][0]
+        assert phonemes[k - 1][1] == start  # no gap before the b
+        closure = pcm[int(start * SYNTH_RATE):int((start + 0.01) * SYNTH_RATE)]
+        assert np.abs(closure.astype(np.int32)).max() <= 1  # its first 10 ms are the silent closure
