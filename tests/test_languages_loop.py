@@ -153,3 +153,13 @@ def test_a_voiced_stop_after_a_silent_closure_gets_its_closure_in_the_truth():
         assert phonemes[k - 1][1] == start  # no gap before the b
         closure = pcm[int(start * SYNTH_RATE):int((start + 0.01) * SYNTH_RATE)]
         assert np.abs(closure.astype(np.int32)).max() <= 1  # its first 10 ms are the silent closure
+
+
+def test_vietnamese_and_thai_tones_are_not_read_as_a_vowel():
+    # hand-written: Vietnamese bó [ɓɔ˧˥], sáng [saːŋ˧˥] (espeak-ng writes ɓ as b and the
+    # rising tone as a trailing ɜ, which is no vowel of these words); Thai ไก่ [kàj]
+    pytest.importorskip("espeakng_loader")
+    from lipsync.phonetics.g2p import transcribe
+
+    assert [w.phones for w in transcribe("bó sáng", "vi")] == [("b", "ɔ"), ("s", "aː", "ŋ")]
+    assert "ɜ" not in "".join(p for w in transcribe("ไก่ ม้า", "th") for p in w.phones)
