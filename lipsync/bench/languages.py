@@ -1,9 +1,12 @@
 """Figures for speech in other languages (issue 29): ``languages`` and ``languages-real``.
 
 ``languages`` -- speech with a known phoneme timeline: for each of 20 languages in 8 scripts
-(Latin, Cyrillic, Greek, Devanagari, Han, Hangul, Arabic, Japanese kana), one sentence with
-bilabials, spoken by espeak-ng, which reports each phoneme as it speaks it
-(:func:`lipsync.phonetics.g2p.synthesise`: the truth). Per language:
+(Latin, Cyrillic, Greek, Devanagari, Han, Hangul, Arabic, Japanese kana), four or five
+sentences with bilabials (:data:`SENTENCES`: 10 to 17 s of speech and 16 to 37 lip closures
+per language), each spoken by espeak-ng, which reports each phoneme as it speaks it
+(:func:`lipsync.phonetics.g2p.synthesise`: the truth), and aligned on its own. Per
+language, summed over its sentences (frames agreeing over frames, closures shown over
+closures, so a figure's counts are in its row):
 
 * the map: the truth's phones, how many map to no viseme (a fallback: must be 0), and
   whether every bilabial stop or nasal maps to the closed mouth;
@@ -13,8 +16,9 @@ bilabials, spoken by espeak-ng, which reports each phoneme as it speaks it
   :data:`~lipsync.speech.align.BOUNDARY_OFFSET_OTHER_S`), and the share of the truth's
   bilabial stops and nasals shown closed: a frame of the video as the renderer's sequencer
   plans it (which keeps every closure on at least one frame), within the phone widened by
-  half a frame each side, shows the closed mouth (more than half way through a morph); alignment speed as a
-  multiple of real time on one core (``jobs=1``, CPU time of this process);
+  half a frame each side, shows the closed mouth (more than half way through a morph);
+  alignment speed as a multiple of real time on one core (``jobs=1``, CPU time of this
+  process); the lowest confidence of its sentences;
 * without the transcript (the free phone loop): the same two shares.
 
 ``languages-real`` -- the six real recordings of ``../shared/languages`` (Japanese, Spanish,
@@ -48,29 +52,98 @@ FPS = 25.0
 #: when either neighbouring frame shows it.
 BILABIAL_SLACK_S = 0.5 / FPS
 
-#: (BCP 47 tag, script, sentence): everyday sentences with bilabial stops and nasals,
-#: written as a native speaker would (numbers as digits in one, read by espeak-ng).
-SENTENCES: Tuple[Tuple[str, str, str], ...] = (
-    ("fr", "Latin", "Le petit bateau bleu passe sous le pont de pierre."),
-    ("es", "Latin", "Mi padre compró un barco blanco para pescar en el mar."),
-    ("de", "Latin", "Mein Bruder baut ein Boot aus Papier und Pappe."),
-    ("it", "Latin", "Il mio bambino mangia una mela bianca ogni mattina."),
-    ("pt-BR", "Latin", "Meu pai comprou um barco muito bonito no mês passado."),
-    ("sv", "Latin", "Min mamma bakar bröd med mjöl och smör på morgonen."),
-    ("pl", "Latin", "Moja mama piecze pyszny chleb w piątek rano."),
-    ("nl", "Latin", "Mijn broer maakt een mooie boot van papier."),
-    ("tr", "Latin", "Benim babam pazartesi günü büyük bir balık aldı."),
-    ("fi", "Latin", "Minun poikani pelaa palloa puistossa aamupäivällä."),
-    ("id", "Latin", "Bapak membeli 3 buah mangga di pasar pagi ini."),
-    ("vi", "Latin", "Mẹ tôi mua một bó hoa đẹp ở chợ buổi sáng."),
-    ("ru", "Cyrillic", "Мой папа купил большую белую лодку в мае."),
-    ("uk", "Cyrillic", "Мій брат пише мамі про погоду біля моря."),
-    ("el", "Greek", "Ο μπαμπάς μου αγόρασε μια μεγάλη μπλε βάρκα."),
-    ("hi", "Devanagari", "मेरे पापा ने बाज़ार से बहुत मीठे आम खरीदे।"),
-    ("zh", "Han", "爸爸妈妈明天不买苹果，他们买面包。"),
-    ("ko", "Hangul", "우리 아버지는 바다에서 배를 봤습니다."),
-    ("ar", "Arabic", "ذهب أبي إلى البحر مع أمي في الصباح."),
-    ("ja", "Japanese kana", "ぼくの ははは まいばん パンを たべます。"),
+#: (BCP 47 tag, script, sentences): everyday sentences written for this bench as a native
+#: speaker would write them, each with bilabial stops and nasals. The first of each language
+#: is round four's single sentence (Indonesian's has a number as digits, read by espeak-ng);
+#: the others (round five) use other words and sounds (f and v, rounded vowels, clusters such
+#: as pl, bl, mb where the language has them), so that each language's figure rests on at
+#: least 10 s of speech and 15 lip closures (counted in the figure's rows); French, Dutch,
+#: Vietnamese and Russian, shorter to say, have a fifth.
+SENTENCES: Tuple[Tuple[str, str, Tuple[str, ...]], ...] = (
+    ("fr", "Latin", ("Le petit bateau bleu passe sous le pont de pierre.",
+                     "Ma mère boit un bon café au lait chaque matin avant de partir.",
+                     "Pierre a mis ses bottes brunes pour promener le chien dans le bois.",
+                     "Nous avons vu beaucoup de pommes vertes au marché du samedi.",
+                     "Le bébé ouvre la bouche pour manger sa purée de pommes de terre.")),
+    ("es", "Latin", ("Mi padre compró un barco blanco para pescar en el mar.",
+                     "Vamos a la playa por la mañana con mi hermano pequeño.",
+                     "Mi abuela prepara una paella muy buena todos los domingos.",
+                     "El perro bebe agua fresca bajo el árbol del parque.")),
+    ("de", "Latin", ("Mein Bruder baut ein Boot aus Papier und Pappe.",
+                     "Im Sommer fahren wir mit dem Fahrrad an den blauen Bodensee.",
+                     "Meine Mutter backt jeden Morgen frisches Brot mit Butter.",
+                     "Der Bäcker am Markt verkauft Äpfel, Birnen und Pflaumen.")),
+    ("it", "Latin", ("Il mio bambino mangia una mela bianca ogni mattina.",
+                     "Mia madre compra il pane e il burro al mercato del paese.",
+                     "Domani porto il cane a passeggiare nel parco vicino al mare.",
+                     "Abbiamo bevuto un buon vino bianco dopo la partita.")),
+    ("pt-BR", "Latin", ("Meu pai comprou um barco muito bonito no mês passado.",
+                        "A minha mãe faz um bolo de banana todo domingo de manhã.",
+                        "Paulo bebeu uma limonada bem gelada na praia.",
+                        "Vamos pegar o ônibus para o mercado municipal amanhã.")),
+    ("sv", "Latin", ("Min mamma bakar bröd med mjöl och smör på morgonen.",
+                     "Pappa byggde en liten båt av plankor i somras.",
+                     "Vi promenerade i parken och plockade blåbär.",
+                     "Mormor bjuder på kaffe och bullar varje måndag.")),
+    ("pl", "Latin", ("Moja mama piecze pyszny chleb w piątek rano.",
+                     "Mój brat pływa w morzu prawie każdego dnia.",
+                     "Babcia kupiła pomidory i ziemniaki na targu.",
+                     "Po południu pójdziemy z psem do parku.")),
+    ("nl", "Latin", ("Mijn broer maakt een mooie boot van papier.",
+                     "Mijn moeder bakt brood met boter en appels.",
+                     "Op maandag gaan we met de bus naar het museum.",
+                     "Bram speelt met zijn blauwe bal in de tuin bij de boom.",
+                     "Pim eet elke morgen pap met bessen en een beker melk.")),
+    ("tr", "Latin", ("Benim babam pazartesi günü büyük bir balık aldı.",
+                     "Annem her sabah mutfakta bize peynirli börek yapar.",
+                     "Bu akşam parkta arkadaşlarımla top oynayacağım.",
+                     "Pembe bir bisiklet almak için para biriktiriyorum.")),
+    ("fi", "Latin", ("Minun poikani pelaa palloa puistossa aamupäivällä.",
+                     "Mummo paistoi pullaa ja maukasta mustikkapiirakkaa.",
+                     "Me menemme bussilla kaupungin torille maanantaina.",
+                     "Pappa kalasti pienestä veneestä isoja ahvenia.")),
+    ("id", "Latin", ("Bapak membeli 3 buah mangga di pasar pagi ini.",
+                     "Ibu memasak bubur ayam untuk sarapan kami.",
+                     "Mereka bermain bola di lapangan bersama teman-teman.",
+                     "Pembantu membersihkan meja makan sebelum malam.")),
+    ("vi", "Latin", ("Mẹ tôi mua một bó hoa đẹp ở chợ buổi sáng.",
+                     "Bố em làm bánh mì mỗi buổi chiều.",
+                     "Bạn Minh muốn mua một quả bóng mới.",
+                     "Em bé ăn phở bò với mẹ ở bên bờ biển.",
+                     "Ba mẹ tôi mới mua một chiếc xe máy màu bạc.")),
+    ("ru", "Cyrillic", ("Мой папа купил большую белую лодку в мае.",
+                        "Мама испекла пирог с малиной и яблоками.",
+                        "Мы поедем в парк на метро в понедельник.",
+                        "Бабушка пьёт крепкий чай с мёдом и блинами.",
+                        "Мы купили бумагу, перья и большую папку в магазине.")),
+    ("uk", "Cyrillic", ("Мій брат пише мамі про погоду біля моря.",
+                        "Бабуся пече пиріжки з вишнями щонеділі.",
+                        "Ми поїдемо до парку в понеділок вранці.",
+                        "Мама купила молоко, масло і білий хліб.")),
+    ("el", "Greek", ("Ο μπαμπάς μου αγόρασε μια μεγάλη μπλε βάρκα.",
+                     "Η μητέρα μου φτιάχνει πίτα με σπανάκι κάθε μέρα.",
+                     "Πάμε στην παραλία με το πρωινό λεωφορείο.",
+                     "Ο Πέτρος μένει σε ένα μικρό σπίτι μπροστά στη θάλασσα.")),
+    ("hi", "Devanagari", ("मेरे पापा ने बाज़ार से बहुत मीठे आम खरीदे।",
+                          "मेरी माँ सुबह पराठे बनाती है।",
+                          "हम बस से मुंबई के बड़े बाग़ में गए।",
+                          "बाबा ने बच्चों को पानी पीने के लिए बुलाया।")),
+    ("zh", "Han", ("爸爸妈妈明天不买苹果，他们买面包。",
+                   "我妹妹每天早上喝牛奶。",
+                   "朋友们在公园里跑步，爬山。",
+                   "北京的冬天不太冷，比南方好。")),
+    ("ko", "Hangul", ("우리 아버지는 바다에서 배를 봤습니다.",
+                      "엄마는 매일 밤 밥을 만들어 주십니다.",
+                      "봄에는 바람이 많이 불고 비가 옵니다.",
+                      "민수는 버스를 타고 미술관에 갑니다.")),
+    ("ar", "Arabic", ("ذهب أبي إلى البحر مع أمي في الصباح.",
+                      "يشرب أبي الماء البارد بعد المباراة.",
+                      "اشترت أمي خبزا وموزا من السوق.",
+                      "باب المدرسة مفتوح كل يوم من الصباح إلى المساء.")),
+    ("ja", "Japanese kana", ("ぼくの ははは まいばん パンを たべます。",
+                             "みんなで ひるに うみへ いきました。",
+                             "ぼうしを かぶって こうえんで あそびます。",
+                             "まいあさ ぎゅうにゅうを のんで べんきょうします。")),
 )
 
 #: The real recordings (folder, language) in ``../shared/languages``.
@@ -129,11 +202,22 @@ def is_bilabial(label: str) -> bool:
     return f.place == "bilabial" and f.manner in ("stop", "nasal")
 
 
-def bilabials_closed(truth, shown: np.ndarray, closed: Sequence[str]) -> Optional[float]:
-    """Share of the truth's lip closures (runs of touching bilabial stops and nasals, as in
-    "um barco": one closure) during which a frame of the video (:func:`shown`: frame n
-    shows time n / fps), widened by :data:`BILABIAL_SLACK_S` each side, shows the closed
-    mouth (more than half way through a morph towards or away from it)."""
+def closures_shown(truth, shown: np.ndarray, closed: Sequence[str]) -> Tuple[int, int]:
+    """(closures shown, closures) of the truth's lip closures (runs of touching bilabial stops
+    and nasals, as in "um barco": one closure): one is shown when a frame of the video
+    (:func:`shown`: frame n shows time n / fps) within it, widened by
+    :data:`BILABIAL_SLACK_S` each side, shows the closed mouth (more than half way through
+    a morph towards or away from it).
+
+    Examples
+    --------
+    >>> from lipsync.timeline import Segment, Timeline
+    >>> truth = Timeline((Segment(0.0, 0.1, "a"), Segment(0.1, 0.2, "m"), Segment(0.2, 0.3, "b"),
+    ...                   Segment(0.3, 0.5, "a"), Segment(0.5, 0.56, "p")))
+    >>> video = np.array(["D"] * 3 + ["A"] * 2 + ["D"] * 9, dtype=object)   # 25 fps
+    >>> closures_shown(truth, video, ["A"])     # "mb" closed; "p" (0.50-0.56 s) not
+    (1, 2)
+    """
     times = np.arange(len(shown)) / FPS
     runs: List[List[float]] = []
     for s in truth:
@@ -144,7 +228,13 @@ def bilabials_closed(truth, shown: np.ndarray, closed: Sequence[str]) -> Optiona
                 runs.append([s.start, s.end])
     hits = [bool(np.isin(shown[(times >= a - BILABIAL_SLACK_S) & (times < b + BILABIAL_SLACK_S)], list(closed)).any())
             for a, b in runs]
-    return float(np.mean(hits)) if hits else None
+    return sum(hits), len(hits)
+
+
+def bilabials_closed(truth, shown: np.ndarray, closed: Sequence[str]) -> Optional[float]:
+    """Share of the truth's lip closures shown closed (:func:`closures_shown`); None: none."""
+    hit, total = closures_shown(truth, shown, closed)
+    return hit / total if total else None
 
 
 def _write_wav(path: Path, pcm: np.ndarray, rate: int) -> None:
@@ -182,34 +272,68 @@ def _synthetic(ctx: Context, rows: List[dict]) -> None:
         return
     pmap = _pmap()
     closed = pmap.closures
-    for lang, script, text in SENTENCES[:4] if ctx.quick else SENTENCES:
-        pcm22, phonemes = synthesise(text, lang)
-        wav = ctx.tmp / f"synth-{lang}.wav"
-        _write_wav(wav, pcm22, 22050)
-        pcm = load_audio(wav)
-        duration = len(pcm) / 16000
-        truth = _timeline(phonemes, duration)
-        fallbacks = sorted({s.label for s in truth if pmap.targets(s.label, notation="ipa") is None})
-        bil_map = [pmap.targets(s.label, notation="ipa") == list(closed) for s in truth if is_bilabial(s.label)]
-        truth_frames = frames(truth, pmap, duration)
-        row = {"figure": "languages", "language": lang, "script": script, "seconds": round(duration, 1),
-               "phones": len(truth), "fallbacks": len(fallbacks) and ",".join(fallbacks),
+    for lang, script, texts in SENTENCES[:4] if ctx.quick else SENTENCES:
+        # summed over the language's sentences: frames agreeing / frames, closures shown / closures
+        n = {"seconds": 0.0, "phones": 0, "frames": 0, "closures": 0}
+        fallbacks, bil_map = set(), []
+        got = {k: [0, 0] for k in ("text_frames", "text_unshifted", "text_closed", "no_text_frames",
+                                   "no_text_closed", "truth_closed")}
+        cpu = {"text": [0.0, 0.0], "no_text": [0.0, 0.0]}
+        confidence, said = [], 0
+        for k, text in enumerate(texts):
+            pcm22, phonemes = synthesise(text, lang)
+            wav = ctx.tmp / f"synth-{lang}-{k}.wav"
+            _write_wav(wav, pcm22, 22050)
+            pcm = load_audio(wav)
+            duration = len(pcm) / 16000
+            truth = _timeline(phonemes, duration)
+            fallbacks |= {s.label for s in truth if pmap.targets(s.label, notation="ipa") is None}
+            bil_map += [pmap.targets(s.label, notation="ipa") == list(closed) for s in truth if is_bilabial(s.label)]
+            truth_frames = frames(truth, pmap, duration)
+            n["seconds"] += duration
+            n["phones"] += len(truth)
+            n["frames"] += len(truth_frames)
+            _add(got["truth_closed"], closures_shown(truth, shown(truth, pmap, duration), closed))
+            n["closures"] = got["truth_closed"][1]
+            if k == 0:
+                _align(pcm[:8000], text, lang)  # loads the decoder and the language's voice first
+            for case, transcript in (("text", text), ("no_text", None)):
+                al, used, warned = _aligned(pcm, transcript, lang)
+                cpu[case][0] += duration
+                cpu[case][1] += used
+                ours = frames(al.phones, pmap, duration)
+                _add(got[f"{case}_frames"], (int(np.sum(ours == truth_frames)), len(truth_frames)))
+                if transcript is not None:  # without the one-frame shift other languages get
+                    back = frames(_shifted(al.phones, -BOUNDARY_OFFSET_OTHER_S, duration), pmap, duration)
+                    _add(got["text_unshifted"], (int(np.sum(back == truth_frames)), len(truth_frames)))
+                    confidence.append(al.confidence)
+                    said += len(warned)
+                _add(got[f"{case}_closed"], closures_shown(truth, shown(al.phones, pmap, duration), closed))
+        row = {"figure": "languages", "language": lang, "script": script, "sentences": len(texts),
+               "seconds": round(n["seconds"], 1), "phones": n["phones"], "frames": n["frames"],
+               "closures": n["closures"], "fallbacks": len(fallbacks) and ",".join(sorted(fallbacks)),
                "bilabials_map_closed": f"{sum(bil_map)}/{len(bil_map)}",
-               "truth_bilabials_seen": _r(bilabials_closed(truth, shown(truth, pmap, duration), closed))}
-        _align(pcm[:8000], text, lang)  # loads the decoder and the language's voice first
-        for case, transcript in (("text", text), ("no_text", None)):
-            al, cpu, said = _aligned(pcm, transcript, lang)
-            ours = frames(al.phones, pmap, duration)
-            row[f"{case}_frames_agree"] = _r(float(np.mean(ours == truth_frames)))
-            if transcript is not None:  # without the one-frame shift other languages get
-                back = frames(_shifted(al.phones, -BOUNDARY_OFFSET_OTHER_S, duration), pmap, duration)
-                row["text_frames_agree_unshifted"] = _r(float(np.mean(back == truth_frames)))
-            row[f"{case}_bilabials_closed"] = _r(bilabials_closed(truth, shown(al.phones, pmap, duration), closed))
-            row[f"{case}_x_real_time_cpu"] = round(duration / max(cpu, 1e-9), 1)
-            if transcript is not None:
-                row["confidence"] = _r(al.confidence)
-                row["warnings"] = len(said)
+               "truth_bilabials_seen": _share(got["truth_closed"])}
+        for case in ("text", "no_text"):
+            row[f"{case}_frames_agree"] = _share(got[f"{case}_frames"])
+            if case == "text":
+                row["text_frames_agree_unshifted"] = _share(got["text_unshifted"])
+            row[f"{case}_bilabials_closed"] = _share(got[f"{case}_closed"])
+            row[f"{case}_closures_shown"] = "{}/{}".format(*got[f"{case}_closed"])
+            row[f"{case}_x_real_time_cpu"] = round(cpu[case][0] / max(cpu[case][1], 1e-9), 1)
+            if case == "text":
+                row["confidence_min"] = _r(min(confidence))
+                row["warnings"] = said
         rows.append(row)
+
+
+def _add(total: List[int], part: Tuple[int, int]) -> None:
+    total[0] += part[0]
+    total[1] += part[1]
+
+
+def _share(total: Sequence[int]) -> Optional[float]:
+    return _r(total[0] / total[1]) if total[1] else None
 
 
 def _shifted(tl, dt: float, duration: float):

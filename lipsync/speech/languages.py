@@ -34,12 +34,13 @@ from __future__ import annotations
 import hashlib
 import unicodedata
 import warnings
+from dataclasses import replace
 from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
 from ..errors import InputError
-from ..timeline import Segment
+from ..timeline import Segment, Timeline
 
 __all__ = ["align_language", "check_english_script", "UnreadWordsWarning", "script_of"]
 
@@ -249,7 +250,53 @@ def align_language(pcm, text: Optional[str], lang: str, *, quiet: bool = True, p
         al = A._align_pcm(pcm, tuple(names), quiet=quiet, path=path, jobs=jobs, recogniser="loop", shown=shown)
     finally:
         A._WIDE.reset(token)
-    return _in_ipa(al, plans, unread)
+    out = _in_ipa(al, plans, unread)
+    voiced = _voiced_frames(pcm)
+    # words too, so that each phone stays inside its word (their edges are the same times)
+    return replace(out, words=_close_voiced_pauses(out.words, voiced), phones=_close_voiced_pauses(out.phones, voiced))
+
+
+#: A pause between two aligned phones at most this long (seconds) ...
+VOICED_PAUSE_MAX_S = 0.3
+#: ... through which the voice goes on (at least this share of its 10 ms frames voiced, by
+#: :class:`~lipsync.speech.voice.VoiceGate`) is not a pause: the aligner put its optional
+#: silence on a quiet voiced sound (the murmur of an m, a weak final ŋ), so the phones on
+#: either side meet in its middle. Measured with the transcript on the ``languages`` bench
+#: (84 espeak-ng sentences, 20 languages): mean frame agreement with the truth's mouth
+#: shapes 0.804 -> 0.817 (languages at 0.75 or more: 15 -> 17; bilabials shown closed 0.957
+#: -> 0.969); at 0.2 s 0.813, at 0.1 s 0.807; a 0.5 or 0.8 share 0.814 and 0.807. Without
+#: the transcript (the phone loop's voiced pauses that are not closures,
+#: :data:`~lipsync.speech.align.LOOP_CLOSURE_QUIETER_DB`) 0.494 -> 0.509 (languages at 0.50
+#: or more: 12 -> 13). On the six real recordings no frame changed, with or without the
+#: transcript (their pauses are unvoiced: breath and silence). English never comes here.
+VOICED_PAUSE_SHARE = 0.3
+
+
+def _voiced_frames(pcm: np.ndarray) -> np.ndarray:
+    """Per 10 ms frame of 16 kHz ``pcm``: voiced (:class:`~lipsync.speech.voice.VoiceGate`)."""
+    from .voice import VoiceGate
+
+    gate = VoiceGate()
+    gate.feed(pcm)
+    return np.asarray(gate.voiced, bool)
+
+
+def _close_voiced_pauses(phones: Timeline, voiced: np.ndarray) -> Timeline:
+    """``phones`` (or words) with each short voiced pause between two of them shared by them
+    (:data:`VOICED_PAUSE_MAX_S`); ``voiced``: :func:`_voiced_frames`."""
+    from .voice import FRAME_S
+
+    out: List[Segment] = []
+    for seg in phones:
+        if out:
+            a, b = int(round(out[-1].end / FRAME_S)), int(round(seg.start / FRAME_S))
+            if 0 < seg.start - out[-1].end <= VOICED_PAUSE_MAX_S + 1e-9 and b > a and a < len(voiced) \
+                    and voiced[a:b].mean() >= VOICED_PAUSE_SHARE:
+                mid = round((out[-1].end + seg.start) / 2, 6)
+                out[-1] = Segment(out[-1].start, mid, out[-1].label)
+                seg = Segment(mid, seg.end, seg.label)
+        out.append(seg)
+    return Timeline(tuple(out), kind=phones.kind, path=phones.path, stated_end=phones.stated_end)
 
 
 def _in_ipa(al, plans, unread: Sequence[str]):
