@@ -151,8 +151,10 @@ def test_a_voiced_stop_after_a_silent_closure_gets_its_closure_in_the_truth():
     for k in inner:
         start = phonemes[k][0]
         assert phonemes[k - 1][1] == start  # no gap before the b
-        closure = pcm[int(start * SYNTH_RATE):int((start + 0.01) * SYNTH_RATE)]
-        assert np.abs(closure.astype(np.int32)).max() <= 1  # its first 10 ms are the silent closure
+        # its first 10 ms are the silent closure (after 1 ms: where a phoneme event lands
+        # depends on espeak-ng's earlier synthesis by a sample or so, the last of the vowel)
+        closure = pcm[int((start + 0.001) * SYNTH_RATE):int((start + 0.01) * SYNTH_RATE)]
+        assert np.abs(closure.astype(np.int32)).max() <= 1
 
 
 def test_vietnamese_and_thai_tones_are_not_read_as_a_vowel():

@@ -1078,13 +1078,13 @@ def align_samples(pcm: np.ndarray, text: Optional[str] = None, *, quiet: bool = 
     from ..phonetics.g2p import is_english
 
     if not is_english(lang):
-        from .languages import align_language
+        from .scripts import OTHER_LANGUAGES
 
-        return align_language(pcm, text, lang, quiet=quiet, path=path, jobs=jobs)
+        return OTHER_LANGUAGES.get("espeak-ipa")(pcm, text, lang, quiet=quiet, path=path, jobs=jobs)
     pcm = _as_pcm(pcm)
     transcript = tuple(normalise_transcript(text)) if text is not None else ()
     if text is not None:
-        from .languages import check_english_script
+        from .scripts import check_english_script
 
         check_english_script(text, transcript, path=path)
     missing = tuple(lookup_missing(transcript))
