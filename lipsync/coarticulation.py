@@ -432,6 +432,23 @@ def viseme_classes(pmap, rest: Optional[str] = None) -> VisemeClasses:
     return VisemeClasses(out, breath=getattr(pmap, "breath", None))
 
 
+#: The default map's (english-to-rhubarb) viseme classes, written out: the sequencer sits
+#: below the maps (lipsync.phonemes reads timelines), so it cannot load the map to learn
+#: them. tests/test_coarticulation.py checks this table against
+#: ``viseme_classes(load_map(DEFAULT_MAP))``.
+DEFAULT_MAP_CLASSES = {
+    "A": "closure",      # M, B, P: lips pressed
+    "B": "other",        # most consonants: lips parted, teeth near
+    "C": "open",         # EH, AE, ...: open
+    "D": "open",         # AA, AY: wide open
+    "E": "rounded",      # AO, ER: slightly rounded
+    "F": "rounded",      # UW, OW, W: puckered
+    "G": "labiodental",  # F, V: lower lip on the teeth
+    "H": "other",        # L: tongue behind the teeth
+    "X": "rest",         # silence
+}
+
+
 def default_classes(names: Iterable[str], *, rest: str, closures: Iterable[str] = ()) -> VisemeClasses:
     """Classes for visemes when no map is given: the default map's, where the names are its.
     No breath: without a map, which viseme the bank draws breath with is unknown.
@@ -441,10 +458,7 @@ def default_classes(names: Iterable[str], *, rest: str, closures: Iterable[str] 
     >>> default_classes(["A", "F", "zz"], rest="X", closures=["A"])
     VisemeClasses({'A': 'closure', 'F': 'rounded', 'zz': 'other', 'X': 'rest'}, breath=None)
     """
-    from .phonemes import DEFAULT_MAP, load_map
-
-    known = viseme_classes(load_map(DEFAULT_MAP))
-    out = {v: known.get(v, "other") for v in names}
+    out = {v: DEFAULT_MAP_CLASSES.get(v, "other") for v in names}
     for v in closures:
         out[v] = "closure"
     out[rest] = "rest"

@@ -524,3 +524,10 @@ def test_fit_speaker_from_videos_and_what_init_video_writes(tmp_path):
     assert "timing: dominance" in text and "coarticulation: {lead: " in text
     loaded = Bank.from_text(text, default_bank_dir())
     assert loaded.timing == "dominance" and loaded.coarticulation.lead == round(fitted.lead, 3)
+
+
+def test_the_default_classes_table_is_the_default_maps():
+    from lipsync.coarticulation import DEFAULT_MAP_CLASSES, viseme_classes
+    from lipsync.phonemes import DEFAULT_MAP, load_map
+
+    assert dict(viseme_classes(load_map(DEFAULT_MAP)).items()) == DEFAULT_MAP_CLASSES
