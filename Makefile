@@ -9,7 +9,7 @@ STAMP   := $(VENV)/.installed
 # The compiled frame kernel is built by the editable install: a changed source rebuilds it.
 # compileall: an editable install leaves no bytecode, and where PYTHONDONTWRITEBYTECODE is
 # set every run would compile the package again (~0.1 s of each lipsync start-up).
-$(STAMP): pyproject.toml setup.py lipsync/_flowkernel.c
+$(STAMP): pyproject.toml setup.py lipsync/morphing/_flowkernel.c
 	$(PY) -m venv $(VENV)
 	$(BIN)/pip install -q --upgrade pip
 	$(BIN)/pip install -q -e '.[test]'

@@ -21,6 +21,6 @@ setup(
     # The flow renderer's frame kernel (AVX2 gathers, chosen at run time by CPU), yuv420p
     # conversion and the Beier-Neely field. optional: without a C compiler the build warns
     # and numba's copies of the kernels are used instead.
-    ext_modules=[Extension("lipsync._flowkernel", ["lipsync/_flowkernel.c"], optional=True,
+    ext_modules=[Extension("lipsync.morphing._flowkernel", ["lipsync/morphing/_flowkernel.c"], optional=True,
                            extra_compile_args=_CFLAGS)],
 )

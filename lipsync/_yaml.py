@@ -71,6 +71,6 @@ def safe_load(text: str) -> Any:
     """``yaml.safe_load(text)`` (the pure-Python loader, as it uses), refusing duplicate keys.
 
     Not libyaml: its parser recurses on the C stack and crashes on deeply nested text
-    (lipsync.bank sends only shallow text to :data:`CSafeLoader`).
+    (lipsync.banks.bank sends only shallow text to :data:`CSafeLoader`).
     """
     return yaml.load(text, Loader=SafeLoader)

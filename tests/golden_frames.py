@@ -45,7 +45,7 @@ def digest(*arrays: np.ndarray) -> str:
 def banks(workdir: Path):
     """The two opaque banks, copied so that their flow stores start empty."""
     import synthetic
-    from lipsync.bank import Bank
+    from lipsync.banks.bank import Bank
 
     toon = workdir / "toon"
     shutil.copytree(ROOT / "visemes" / "toon", toon, ignore=shutil.ignore_patterns("store", ".lipsync*"))
@@ -60,9 +60,9 @@ def banks(workdir: Path):
 
 def cases(workdir: Path):
     """(name, digest) of every case, in a fixed order."""
-    from lipsync.clip import render_clip
-    from lipsync.preview import feature_lines, preview_sheet, strip
-    from lipsync.render import Renderer, available_kernels
+    from lipsync.pipeline.clip import render_clip
+    from lipsync.encode.preview import feature_lines, preview_sheet, strip
+    from lipsync.morphing.render import Renderer, available_kernels
 
     out = {}
     for bname, bank in banks(workdir).items():

@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 
 from lipsync import read_timeline
-from lipsync.phonemes import load_map, map_timeline
+from lipsync.phonetics.phonemes import load_map, map_timeline
 from lipsync.speech.align import align
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -105,7 +105,7 @@ def without_text():
 
 def test_reference_metrics_on_a_known_case():
     # the reference itself: one phone shifted by 10 ms, one phone missing
-    from lipsync.timeline import Segment, Timeline
+    from lipsync.motion.timeline import Segment, Timeline
 
     ref = Timeline((Segment(0.0, 0.1, "M"), Segment(0.1, 0.3, "AA1"), Segment(0.3, 0.4, "P")), stated_end=0.5)
     ours = Timeline((Segment(0.0, 0.11, "M"), Segment(0.11, 0.3, "AA")), stated_end=0.5)

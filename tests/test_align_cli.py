@@ -233,7 +233,7 @@ def test_render_speech_wav_end_to_end(tmp_path, rhubarb_bank):
     assert info["n_frames"] == int(np.ceil(duration * 25))
     assert abs(info["audio_duration"] - duration) <= 1 / 25
     # frames in the middle of long vowels show the shape the synthesiser's own phones give
-    from lipsync.phonemes import load_map, map_timeline
+    from lipsync.phonetics.phonemes import load_map, map_timeline
 
     import imageio_ffmpeg
 

@@ -10,12 +10,12 @@ import numpy as np
 import pytest
 
 import golden_frames
-from lipsync import alpha as alpha_mod
-from lipsync.bank import Bank
-from lipsync.normalise import normalise
-from lipsync.preview import preview_sheet, save_png, strip
-from lipsync.render import METHODS, Renderer, available_kernels
-from lipsync.store import FLOW_DEADZONE
+from lipsync.morphing import alpha as alpha_mod
+from lipsync.banks.bank import Bank
+from lipsync.morphing.normalise import normalise
+from lipsync.encode.preview import preview_sheet, save_png, strip
+from lipsync.morphing.render import METHODS, Renderer, available_kernels
+from lipsync.morphing.store import FLOW_DEADZONE
 
 H, W = 80, 112
 R = 14.0
@@ -55,7 +55,7 @@ def disc_bank(tmp_path_factory):
     write_rgba(d / "A.png", disc_image(**DISC_A))
     # one vertical line through each disc's centre: Beier-Neely with one line pair is the
     # exact translation between them. refine: false -- the discs differ in colour and
-    # opacity, not only in place, which optical flow partly reads as motion (lipsync.refine;
+    # opacity, not only in place, which optical flow partly reads as motion (lipsync.morphing.refine;
     # README "Refined flows" says to turn it off for such pictures), and the expected frames
     # below are the exact translation's
     (d / "bank.yaml").write_text(
@@ -87,7 +87,7 @@ def expected_frame(t, moving=True, shift=SHIFT):
 
 def method_shift(method):
     """The translation a method applies: the stored flows (flow, splat) lose the store's
-    dead zone (lipsync.store.FLOW_DEADZONE) from every displacement."""
+    dead zone (lipsync.morphing.store.FLOW_DEADZONE) from every displacement."""
     return SHIFT - FLOW_DEADZONE if method in ("flow", "splat") else SHIFT
 
 
@@ -243,7 +243,7 @@ def grey_alpha_png(ga: np.ndarray) -> bytes:
 
 
 def test_grey_alpha_png_keeps_alpha(tmp_path):
-    from lipsync.bank import _read_image
+    from lipsync.banks.bank import _read_image
 
     ga = np.zeros((8, 8, 2), np.uint8)
     ga[..., 0] = 200

@@ -10,15 +10,15 @@ import cv2
 import numpy as np
 import pytest
 
-from lipsync import alpha as alpha_mod
-from lipsync.bank import Bank
+from lipsync.morphing import alpha as alpha_mod
+from lipsync.banks.bank import Bank
 from lipsync.cli import main
-from lipsync.clip import render_clip
+from lipsync.pipeline.clip import render_clip
 from lipsync.composite import Composite, Compositor
 from lipsync.encode import ENCODERS, EncodeError, format_for, has_alpha, open_writer, probe
 from lipsync.encode.ffmpeg import ffmpeg_exe
 from lipsync.errors import BankError, InputError
-from lipsync.render import Renderer
+from lipsync.morphing.render import Renderer
 
 H, W = 48, 64
 BANDS = (0, 64, 160, 255)

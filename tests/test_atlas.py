@@ -24,7 +24,7 @@ from lipsync.atlas.build import build_atlas, compose
 from lipsync.atlas.layout import fit, grid
 from lipsync.cli import main
 from lipsync.errors import InputError
-from lipsync.render import Renderer
+from lipsync.morphing.render import Renderer
 
 ROOT = Path(__file__).parent.parent
 HELLO = ROOT / "samples" / "hello.phn"
@@ -394,7 +394,7 @@ def test_dominance_frames_follow_the_banks_timing(tmp_path, dominant_bank):
 def test_frames_without_fps_are_the_frames_render_renders(tmp_path, hello, toon):
     # one default frame rate for every command (issue 20): atlas frames are what a player
     # shows, so without --fps they are render's 25 a second (Moho keys keep Moho's 24)
-    from lipsync.frames import DEFAULT_FPS
+    from lipsync.motion.frames import DEFAULT_FPS
 
     out = tmp_path / "frames.json"
     assert main(["cues", str(HELLO), "--format", "atlas", "--atlas", str(hello / "mouth.json"),

@@ -26,7 +26,7 @@ from lipsync.atlas import load_atlas
 from lipsync.atlas.build import compose
 from lipsync.cli import main
 from lipsync.editor.browser import chromium, missing, wait
-from lipsync.render import Renderer
+from lipsync.morphing.render import Renderer
 
 H, W = 72, 120
 #: (centre x, centre y, radius, colour, alpha) per viseme: the discs move, grow and fade.

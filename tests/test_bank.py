@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import yaml
 
-from lipsync.bank import Bank
+from lipsync.banks.bank import Bank
 from lipsync.cli import main
 from lipsync.errors import BankError
 

@@ -14,7 +14,7 @@ import synthetic
 from lipsync.batch import ManifestError, clip_key, local_bank, pack_bank, read_manifest
 from lipsync.batch.bankpack import install_entries
 from lipsync.batch.sidecar import read_done, sidecar_path, write_done
-from lipsync.bank import Bank
+from lipsync.banks.bank import Bank
 from lipsync.cli import main
 
 

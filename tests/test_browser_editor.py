@@ -185,7 +185,7 @@ def test_undo_redo_add_rename_delete(tmp_path, template_bank, driver):
         assert driver.find_element("id", "play").text == "Play"
         driver.find_element("id", "save").click()
         wait(driver, "document.getElementById('message').textContent.startsWith('saved')", what="the save")
-        from lipsync.bank import Bank
+        from lipsync.banks.bank import Bank
         saved = Bank.load(bank)
         assert [n for n in saved.line_names if n.startswith("arc_l")] == [f"arc_l#{i}" for i in range(8)]
         assert saved.features["O"]["arc_r"].kind == "bezier"

@@ -33,7 +33,7 @@ import yaml
 
 import synthetic
 from lipsync import cli, encode
-from lipsync.bank import MAX_IMAGE_PIXELS, MAX_LINES, MAX_VISEMES
+from lipsync.banks.bank import MAX_IMAGE_PIXELS, MAX_LINES, MAX_VISEMES
 
 ROOT = Path(__file__).resolve().parent.parent
 HELLO = ROOT / "samples" / "hello.phn"

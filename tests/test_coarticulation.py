@@ -1,4 +1,4 @@
-"""The dominance timing model (lipsync.coarticulation): frames against a plain reference written
+"""The dominance timing model (lipsync.motion.coarticulation): frames against a plain reference written
 here from the module's description, its articulatory promises (closures closed, long sounds
 held, short ones undershot, rounding anticipated), continuity, the live = offline guarantee
 with its own look-ahead, bank.yaml's timing settings, the CLI option, and fitting (known
@@ -17,13 +17,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from lipsync import Animator, Bank, coarticulation as co
+from lipsync import Animator, Bank
+from lipsync.motion import coarticulation as co
 from lipsync._data import default_bank_dir
 from lipsync.errors import BankError, InputError
 from lipsync.live import LiveAnimator, replay_specs
-from lipsync.phonemes import load_map
-from lipsync.sequencer import FrameSpec, frame_count, sequence
-from lipsync.timeline import Segment, Timeline
+from lipsync.phonetics.phonemes import load_map
+from lipsync.motion.sequencer import FrameSpec, frame_count, sequence
+from lipsync.motion.timeline import Segment, Timeline
 
 sys.path.insert(0, str(Path(__file__).parent))
 from test_live import REAL, TTS, _random_visemes, _timeline  # noqa: E402  (the live tests' own timelines)
@@ -391,7 +392,7 @@ def test_timing_names_and_errors():
     with pytest.raises(InputError, match="valid: linear, .*dominance"):
         co.check_timing("bouncy")
     with pytest.raises(InputError, match="timing model, not a transition curve"):
-        from lipsync.timing import get_curve
+        from lipsync.motion.timing import get_curve
         get_curve("dominance")
     assert co.as_params({"lead": 0.0}).lead == 0.0
     with pytest.raises(InputError, match="lead"):
@@ -452,7 +453,7 @@ def grid_clips():
     word alignment (words split into phones by typical durations, as the grid reader does)."""
     from lipsync.face.measure import lip_opening
     from lipsync.face.track import track_video
-    from lipsync.phonemes import map_timeline
+    from lipsync.phonetics.phonemes import map_timeline
     from lipsync.readers.grid import read_words
     from lipsync.speech.phonetise import words_to_phones
 
@@ -527,7 +528,7 @@ def test_fit_speaker_from_videos_and_what_init_video_writes(tmp_path):
 
 
 def test_the_default_classes_table_is_the_default_maps():
-    from lipsync.coarticulation import DEFAULT_MAP_CLASSES, viseme_classes
-    from lipsync.phonemes import DEFAULT_MAP, load_map
+    from lipsync.motion.coarticulation import DEFAULT_MAP_CLASSES, viseme_classes
+    from lipsync.phonetics.phonemes import DEFAULT_MAP, load_map
 
     assert dict(viseme_classes(load_map(DEFAULT_MAP)).items()) == DEFAULT_MAP_CLASSES

@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 from lipsync.cli import main
-from lipsync.phonemes import canonical_viseme_timeline, load_map
+from lipsync.phonetics.phonemes import canonical_viseme_timeline, load_map
 from lipsync.readers import read_timeline
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -7,12 +7,12 @@ import pytest
 import yaml
 
 import synthetic
-from lipsync.bank import Bank, Feature, mirror_partner_index
+from lipsync.banks.bank import Bank, Feature, mirror_partner_index
 from lipsync.errors import BankError
-from lipsync.normalise import bank_axis, is_symmetric, symmetric_lines
-from lipsync.preview import draw_lines, feature_lines
-from lipsync.render import Renderer
-from lipsync.store import FlowStore
+from lipsync.morphing.normalise import bank_axis, is_symmetric, symmetric_lines
+from lipsync.encode.preview import draw_lines, feature_lines
+from lipsync.morphing.render import Renderer
+from lipsync.morphing.store import FlowStore
 
 
 def write(folder, mutate=None):

@@ -27,8 +27,11 @@ def test_every_public_name_is_in_the_api_reference():
     assert {"write_video", "render_clip", "Bank", "Animator", "LiveAnimator"} <= documented
     listed = set(re.findall(r"^api-lipsync\.(\w+)$", page, re.M))
     assert listed == set(lipsync._SUBMODULES)
+    import importlib
+
     for module in lipsync._SUBMODULES:
-        assert f".. automodule:: lipsync.{module}\n   :members:" in generated.module_page(module)
+        real = importlib.import_module(f"lipsync.{module}").__name__  # where a moved module lives
+        assert f".. automodule:: {real}\n   :members:" in generated.module_page(module)
 
 
 def test_the_cli_reference_has_every_command_and_option():

@@ -14,7 +14,7 @@ import cv2
 import numpy as np
 import pytest
 
-from lipsync.dubbing import DubWarning, dub, lost_frames_text
+from lipsync.pipeline.dubbing import DubWarning, dub, lost_frames_text
 from lipsync.composite.plate import PlateCompositor, compose, pingpong, pose_inverse
 from lipsync.face import measure as M
 from lipsync.face import topology as T
@@ -214,9 +214,9 @@ def test_cli_exits_2_naming_a_video_without_a_face_and_speech_without_sound(cut,
 
 
 def test_render_lives_on_the_plate_and_still_turns_it_off(bank):
-    from lipsync.animator import Animator
-    from lipsync.bank import Bank
-    from lipsync.timeline import Segment, Timeline
+    from lipsync.pipeline.animator import Animator
+    from lipsync.banks.bank import Bank
+    from lipsync.motion.timeline import Segment, Timeline
 
     b = Bank.load(bank)
     assert b.plate is not None and b.plate.enabled
@@ -244,8 +244,8 @@ def test_render_lives_on_the_plate_and_still_turns_it_off(bank):
 
 
 def test_a_broken_cache_entry_is_a_miss(cut, tmp_path):
-    from lipsync.bank import Bank
-    from lipsync.dubbing import bank_from_video, video_track
+    from lipsync.banks.bank import Bank
+    from lipsync.pipeline.dubbing import bank_from_video, video_track
 
     video = GRID / f"{VIDEO}.mpg"
     info = probe_video(video)
@@ -270,9 +270,9 @@ def test_a_broken_cache_entry_is_a_miss(cut, tmp_path):
 
 @pytest.mark.parametrize("method", ["flow", "splat"])
 def test_rendering_a_region_gives_the_full_frames_pixels_there(bank, method):
-    from lipsync.bank import Bank
-    from lipsync.render import Renderer, available_kernels
-    from lipsync.store import Crop
+    from lipsync.banks.bank import Bank
+    from lipsync.morphing.render import Renderer, available_kernels
+    from lipsync.morphing.store import Crop
 
     b = Bank.load(bank)
     h, w = b.shape
@@ -292,10 +292,10 @@ def test_rendering_a_region_gives_the_full_frames_pixels_there(bank, method):
 def test_bank_yaml_switches_the_plate_off_and_a_missing_plate_file_is_named(bank, tmp_path):
     import shutil
 
-    from lipsync.animator import Animator
-    from lipsync.bank import Bank
+    from lipsync.pipeline.animator import Animator
+    from lipsync.banks.bank import Bank
     from lipsync.errors import BankError
-    from lipsync.timeline import Segment, Timeline
+    from lipsync.motion.timeline import Segment, Timeline
 
     copy = tmp_path / "bank"
     shutil.copytree(bank, copy, ignore=shutil.ignore_patterns(".lipsync"))

@@ -16,10 +16,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from lipsync import _yaml
-from lipsync.bank import Bank
+from lipsync.banks.bank import Bank
 from lipsync.cli import main
 from lipsync.errors import BankError, MapError
-from lipsync.phonemes import load_map
+from lipsync.phonetics.phonemes import load_map
 
 
 @pytest.fixture()

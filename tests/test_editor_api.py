@@ -17,10 +17,10 @@ import yaml
 from starlette.testclient import TestClient
 
 import synthetic
-from lipsync.bank import Bank
+from lipsync.banks.bank import Bank
 from lipsync.editor import Editor, make_app
-from lipsync.render import Renderer
-from lipsync.store import FlowStore
+from lipsync.morphing.render import Renderer
+from lipsync.morphing.store import FlowStore
 from lipsync.web import Session, start_in_thread
 
 
@@ -338,7 +338,7 @@ def test_abandoned_draft_flows_are_removed_on_close(bank_dir, tmp_path):
     ed.close()
     bank = Bank.load(bank_dir)
     from lipsync.editor.server import normalise_axis
-    from lipsync.preprocess import all_pairs
+    from lipsync.morphing.preprocess import all_pairs
 
     wanted = {store.pair_path(store.pair_key(bank, a, b, normalise_axis(bank))) for a, b in all_pairs(bank.names)}
     flows = set(store.pair_path("x").parent.glob("*" + store.pair_path("x").suffix))

@@ -16,7 +16,7 @@ import pytest
 import yaml
 from starlette.testclient import TestClient
 
-from lipsync.banks.init import init_bank
+from lipsync.videobank.photos import init_bank
 from lipsync.editor import Editor, make_app
 from lipsync.face.lines import FACE_WARP
 from lipsync.face.video import read_video

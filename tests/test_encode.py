@@ -572,7 +572,7 @@ def x264_options(path):
 
 
 def test_named_preset_and_threads_reach_x264(tmp_path):
-    from lipsync.clip import DEFAULT_PRESET
+    from lipsync.pipeline.clip import DEFAULT_PRESET
 
     assert DEFAULT_PRESET in encode.X264_PRESETS
     out = tmp_path / "th.mp4"

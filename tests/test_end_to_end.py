@@ -105,7 +105,7 @@ def test_parallel_png_render_equals_the_serial_frames_in_order(rhubarb_bank, tmp
     # frames in order, bit for bit (PNG is lossless).
     import cv2
 
-    from lipsync.clip import render_clip
+    from lipsync.pipeline.clip import render_clip
 
     tsv = tmp_path / "cues.tsv"
     tsv.write_text("".join(f"{t:.2f}\t{v}\n" for t, v in CUES))
@@ -121,7 +121,7 @@ def test_render_parallel_keeps_order_and_stops_on_errors():
     import random
     import time
 
-    from lipsync.clip import render_parallel
+    from lipsync.pipeline.clip import render_parallel
 
     def render_into(i, buf):
         time.sleep(random.random() * 0.005)  # finish out of order
@@ -147,7 +147,7 @@ def test_render_parallel_renders_a_held_frame_once_and_prepares_on_the_workers()
     import threading
     import time
 
-    from lipsync.clip import render_parallel
+    from lipsync.pipeline.clip import render_parallel
 
     # frames 0..59 show value i // 4 (each held for 4 frames), except a run of 9 equal ones
     values = [i // 4 for i in range(60)]
@@ -179,8 +179,8 @@ def test_render_parallel_renders_a_held_frame_once_and_prepares_on_the_workers()
 def test_a_damaged_flow_entry_is_recomputed_during_render(rhubarb_bank, tmp_path):
     import shutil
 
-    from lipsync.clip import render_clip
-    from lipsync.store import StoreWarning
+    from lipsync.pipeline.clip import render_clip
+    from lipsync.morphing.store import StoreWarning
 
     bank_dir = tmp_path / "bank"
     shutil.copytree(rhubarb_bank, bank_dir, ignore=shutil.ignore_patterns(".lipsync"))
@@ -199,8 +199,8 @@ def test_a_damaged_flow_entry_is_recomputed_during_render(rhubarb_bank, tmp_path
 
 @pytest.mark.parametrize("cores, threads", [(2, "1"), (8, None)])
 def test_render_clip_encodes_on_one_x264_thread_on_two_cores(rhubarb_bank, tmp_path, monkeypatch, cores, threads):
-    # On <= 2 cores the render threads fill the machine; x264 gets one thread (lipsync.clip).
-    from lipsync import clip
+    # On <= 2 cores the render threads fill the machine; x264 gets one thread (lipsync.pipeline.clip).
+    from lipsync.pipeline import clip
     from test_encode import x264_options
 
     monkeypatch.setattr(clip.os, "cpu_count", lambda: cores)

@@ -18,7 +18,7 @@ import cv2
 import numpy as np
 import pytest
 
-from lipsync.bank import Bank
+from lipsync.banks.bank import Bank
 from lipsync.banks.yamlio import dump_bank
 from lipsync.errors import InputError
 from lipsync.face import measure as M
@@ -425,7 +425,7 @@ def test_a_face_unlike_the_dev_speaker(mesh):
 
 def test_a_face_in_profile_is_found_but_warned_about(tmp_path):
     # A man filming in profile (CC0): the mesh is frontal, so lines on a profile are poor
-    from lipsync.banks.init import init_bank
+    from lipsync.videobank.photos import init_bank
 
     for v in "XA":
         cv2.imwrite(str(tmp_path / f"{v}.png"), cv2.imread(str(FACES / "camera.jpg")))

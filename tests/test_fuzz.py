@@ -51,10 +51,10 @@ from hypothesis import strategies as st
 import synthetic
 from hypothesis_profiles import FUZZ
 from lipsync._data import data_dir, default_bank_dir
-from lipsync.bank import MAX_IMAGE_PIXELS, MAX_LINES, MAX_VISEMES, Bank
+from lipsync.banks.bank import MAX_IMAGE_PIXELS, MAX_LINES, MAX_VISEMES, Bank
 from lipsync.errors import BankError, InputError, MapError, TimelineError
-from lipsync.phonemes import PhonemeMap, load_map
-from lipsync.timeline import Timeline
+from lipsync.phonetics.phonemes import PhonemeMap, load_map
+from lipsync.motion.timeline import Timeline
 from lipsync.readers import READERS, read_timeline
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -680,7 +680,7 @@ YAML_ATTACKS = [
     # Custom and Python tags: safe_load must refuse them.
     "name: !!python/object/apply:os.system ['echo pwned']\nrest: X\nvisemes: {}\n",
     "name: !custom toon\nrest: X\nvisemes: {}\n",
-    "!!python/object:lipsync.bank.Bank {}\n",
+    "!!python/object:lipsync.banks.bank.Bank {}\n",
     "name: !!binary aGVsbG8=\nrest: X\nvisemes: !!set {X: null}\n",
     "name: toon\nrest: X\nvisemes: !!omap [{X: {image: X.png, lines: {a: [[0, 0], [1, 1]]}}}]\n",
     # Aliases: a "billion laughs" document (shared references, must stay small).
@@ -951,8 +951,8 @@ def test_deeply_nested_yaml_is_refused_not_a_crash(loader, shape, tmp_path):
               "block-seq": "\n" + "- " * DEEP + "x"}[shape]
     target = tmp_path / ("bank.yaml" if loader == "bank" else "map.yaml")
     target.write_text(f"name: t\nrest: X\nsilence: X\nfallback: C\nmap: {nested}\nvisemes: {nested}\n")
-    call = (f"from lipsync.bank import Bank; Bank.load({str(tmp_path)!r})" if loader == "bank" else
-            f"from lipsync.phonemes import load_map; load_map({str(target)!r})")
+    call = (f"from lipsync.banks.bank import Bank; Bank.load({str(tmp_path)!r})" if loader == "bank" else
+            f"from lipsync.phonetics.phonemes import load_map; load_map({str(target)!r})")
     code = ("import sys\nfrom lipsync.errors import InputError\ntry:\n    " + call +
             "\nexcept InputError as exc:\n    print(exc, file=sys.stderr)\n    sys.exit(2)\n")
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)

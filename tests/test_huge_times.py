@@ -3,7 +3,7 @@
 ``1e308`` is a finite float, but times a frame rate it is infinity, and every place that
 turns time into a frame number overflowed (``render``, ``timeline --frames``, the Moho cue
 writer, serve's render jobs, ``frame_at``). Times are bounded where they enter: the readers
-refuse any time past :data:`lipsync.timeline.MAX_TIMELINE_S` (24 hours) naming the file and
+refuse any time past :data:`lipsync.motion.timeline.MAX_TIMELINE_S` (24 hours) naming the file and
 line, a Timeline refuses one built by code, and ``frame_at`` of both animators takes any
 number (NaN is refused: a broken clock, not a time).
 """
@@ -26,8 +26,8 @@ from lipsync.cli import main
 from lipsync.errors import InputError, TimelineError
 from lipsync.live import LiveAnimator
 from lipsync.readers import read_timeline
-from lipsync.sequencer import frame_count, sequence
-from lipsync.timeline import MAX_TIMELINE_S, Segment, Timeline
+from lipsync.motion.sequencer import frame_count, sequence
+from lipsync.motion.timeline import MAX_TIMELINE_S, Segment, Timeline
 from lipsync.writers import write_cues
 
 #: The issue's files: (name, text, the line holding the huge time).

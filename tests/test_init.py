@@ -8,8 +8,8 @@ import pytest
 import yaml
 
 from lipsync._data import default_bank_dir
-from lipsync.bank import Bank
-from lipsync.banks.init import FRAME_PREFIX, MOUTH_FILL, _is_mouth, init_bank
+from lipsync.banks.bank import Bank
+from lipsync.videobank.photos import FRAME_PREFIX, MOUTH_FILL, _is_mouth, init_bank
 from lipsync.banks.names import SYSTEMS
 from lipsync.cli import main
 from lipsync.errors import InputError
@@ -70,7 +70,7 @@ def test_face_box_maps_the_template_face_onto_it(tmp_path, toon):
 
 
 def bank_axis_of(bank):
-    from lipsync.normalise import bank_axis
+    from lipsync.morphing.normalise import bank_axis
     return bank_axis(bank)
 
 
@@ -277,7 +277,7 @@ def test_photos_of_one_face_become_one_face_by_default(tmp_path, grid_frames, ca
 def test_a_symmetric_face_gets_a_symmetric_bank(tmp_path, grid_frames):
     from lipsync.face.landmarks import FaceMesh
     from lipsync.face.lines import midline_axis
-    from lipsync.normalise import bank_axis
+    from lipsync.morphing.normalise import bank_axis
 
     # each frame's left half mirrored onto its right: an exactly symmetric face
     mesh = FaceMesh()

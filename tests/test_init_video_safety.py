@@ -179,7 +179,7 @@ def test_the_face_is_found_upright_whatever_the_rotation_tag(turned, name, turns
 
 
 def test_init_video_of_a_sideways_tagged_clip_makes_an_upright_bank(turned, tmp_path, capsys, caplog):
-    from lipsync.bank import Bank
+    from lipsync.banks.bank import Bank
     from lipsync.face.landmarks import FaceMesh
 
     out = tmp_path / "me"
@@ -201,7 +201,7 @@ def test_jpeg_exif_orientation_is_honoured(tmp_path):
     import cv2
     import numpy as np
 
-    from lipsync.bank import read_image
+    from lipsync.banks.bank import read_image
     from lipsync.face.video import read_video
 
     frame = next(iter(read_video(CLIP)))
@@ -237,8 +237,8 @@ def test_a_silent_sound_track_is_exit_2_and_the_transcript_is_not_dropped_silent
 
 def test_underflowing_dominances_are_refused(tmp_path):
     from lipsync._data import default_bank_dir
-    from lipsync.bank import Bank
-    from lipsync.coarticulation import MIN_DOMINANCE, as_params
+    from lipsync.banks.bank import Bank
+    from lipsync.motion.coarticulation import MIN_DOMINANCE, as_params
 
     with pytest.raises(InputError, match="closure.dominance"):
         as_params({"closure": {"dominance": 5e-324}})

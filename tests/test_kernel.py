@@ -16,10 +16,10 @@ import numpy as np
 import pytest
 
 import synthetic
-from lipsync import render as render_mod
-from lipsync.bank import Bank
+from lipsync.morphing import render as render_mod
+from lipsync.banks.bank import Bank
 from lipsync.errors import InputError, UnknownNameError
-from lipsync.render import Renderer, available_kernels, pack_rgbx
+from lipsync.morphing.render import Renderer, available_kernels, pack_rgbx
 
 needs_avx2 = pytest.mark.skipif("avx2" not in available_kernels(),
                                 reason="compiled kernel not built or CPU without AVX2")
@@ -144,7 +144,7 @@ def test_a_strided_output_gets_the_same_frame(banks):
 
 @needs_avx2
 def test_the_compiled_kernel_refuses_geometry_that_would_leave_its_buffers():
-    from lipsync import _flowkernel
+    from lipsync.morphing import _flowkernel
 
     img = pack_rgbx(np.zeros((8, 8, 3), np.uint8))
     tab = np.zeros((4, 4, 4, 2), np.int16)
@@ -231,7 +231,7 @@ def _reference_from_tables(img_a, img_b, tabs, sides, box, step, half, wc, wa):
 @needs_avx2
 @pytest.mark.parametrize("step,half,width", [(2, True, 61), (2, False, 61), (3, False, 58), (2, True, 40)])
 def test_every_path_of_the_compiled_kernel_on_random_tables(step, half, width):
-    from lipsync import _flowkernel
+    from lipsync.morphing import _flowkernel
 
     rng = np.random.default_rng(step * 100 + width + half)
     h, w = 37, width
@@ -268,12 +268,12 @@ def test_without_the_compiled_extension_everything_falls_back_to_numba(banks):
 import sys, numpy as np
 class NoExtension:
     def find_spec(self, name, path=None, target=None):
-        if name == "lipsync._flowkernel":
+        if name == "lipsync.morphing._flowkernel":
             raise ImportError("no compiled extension in this test")
 sys.meta_path.insert(0, NoExtension())
 from lipsync import render
-from lipsync.bank import Bank
-from lipsync.yuv import rgb_to_yuv420p
+from lipsync.banks.bank import Bank
+from lipsync.encode.yuv import rgb_to_yuv420p
 from lipsync import warp
 assert render._flowkernel is None and render.available_kernels() == ["numba"] and warp._compiled is None
 bank = Bank.load({str(bank_dir)!r})
@@ -294,10 +294,10 @@ print(r.kernel)
         frame = np.load(f)
         here = Renderer(banks["full"]).render("X", "O", 0.4)
         assert np.abs(frame.astype(int) - here).max() <= 2
-        from lipsync.yuv import rgb_to_yuv420p
+        from lipsync.encode.yuv import rgb_to_yuv420p
 
         np.testing.assert_array_equal(np.load(y), rgb_to_yuv420p(frame))
-        from lipsync.warp import beier_neely_displacement
+        from lipsync.morphing.warp import beier_neely_displacement
 
         bank = banks["full"]
         field = beier_neely_displacement(bank.shape, dst_lines=bank.lines["X"], src_lines=bank.lines["O"])

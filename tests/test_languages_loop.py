@@ -19,7 +19,7 @@ import pytest
 
 from lipsync.speech.align import LOOP_CLOSURE_MAX_FRAMES, _voiced_loop
 from lipsync.speech.languages import VOICED_PAUSE_MAX_S, _close_voiced_pauses, _voiced_frames
-from lipsync.timeline import PHONEME, Segment, Timeline
+from lipsync.motion.timeline import PHONEME, Segment, Timeline
 
 RATE = 16000
 

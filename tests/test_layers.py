@@ -154,4 +154,4 @@ def test_rooms_only_depend_on_rooms_below_them():
     found = cycles(rooms)
     detail = [f"{a} -> {b}: {why[(a, b)][:3]}" for comp in found for a in comp for b in comp if (a, b) in why]
     assert not found, "rooms importing each other:\n" + "\n".join(detail)
-    assert "lipsync.readers" in rooms["lipsync.writers"] and "lipsync.timeline" in rooms["lipsync.readers"]
+    assert "lipsync.readers" in rooms["lipsync.writers"] and "lipsync.motion" in rooms["lipsync.readers"]

@@ -20,8 +20,8 @@ from lipsync import Animator, Bank, read_timeline
 from lipsync._data import default_bank_dir
 from lipsync.errors import InputError
 from lipsync.live import LOOKAHEAD_S, LiveAnimator, RendererPool, replay_specs
-from lipsync.sequencer import MAX_HELD_PAUSE_S, MAX_TRANSITION_S
-from lipsync.timeline import Segment, Timeline
+from lipsync.motion.sequencer import MAX_HELD_PAUSE_S, MAX_TRANSITION_S
+from lipsync.motion.timeline import Segment, Timeline
 
 ROOT = Path(__file__).resolve().parents[1]
 REAL = [ROOT / "samples" / "hello.phn", ROOT / "samples" / "balloons.TextGrid", ROOT / "samples" / "hello.json",

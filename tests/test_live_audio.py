@@ -27,9 +27,9 @@ from lipsync._data import default_bank_dir
 from lipsync.errors import InputError
 from lipsync.live import LiveAnimator
 from lipsync.live.audio import RATE, Resampler, offline_phones
-from lipsync.live.offline import live_cues, live_specs
+from lipsync.pipeline.liveclip import live_cues, live_specs
 from lipsync.speech.audio import load_audio
-from lipsync.timeline import PHONEME, Segment, Timeline
+from lipsync.motion.timeline import PHONEME, Segment, Timeline
 
 ROOT = Path(__file__).resolve().parents[1]
 GRID = ROOT / "tests" / "data" / "grid-s1-audio"

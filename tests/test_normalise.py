@@ -2,10 +2,10 @@
 
 import numpy as np
 
-from lipsync.bank import WarpParams
-from lipsync.flows import flow_field, pair_flows
-from lipsync.normalise import estimate_axis, is_symmetric, normalise_image, symmetric_lines
-from lipsync.warp import beier_neely_displacement
+from lipsync.banks.bank import WarpParams
+from lipsync.morphing.flows import flow_field, pair_flows
+from lipsync.morphing.normalise import estimate_axis, is_symmetric, normalise_image, symmetric_lines
+from lipsync.morphing.warp import beier_neely_displacement
 
 NAMES = ["lip_l", "lip_r", "mid", "chin", "eye_l", "eye_r"]
 

@@ -32,7 +32,7 @@ THIRD_PARTY = {
 }
 #: Data folders that are ours (the project's MIT licence covers them), with the reason.
 OWN = {
-    "lipsync": "the package's own files (the C kernel's source)",
+    "lipsync/morphing": "the package's own files (the C kernel's source)",
     "lipsync/_visemes": "visemes/README.md, written for this project",
     "lipsync/_visemes/toon": "drawn by tools/make_toon.py from code (visemes/README.md)",
     "lipsync/_configs/maps": "phoneme-to-viseme maps written for lipsync (sources cited in each file)",

@@ -9,9 +9,8 @@ import yaml
 
 from lipsync._data import data_dir
 from lipsync.errors import MapError, UnknownNameError
-from lipsync.phonemes import (MAPS, UnknownLabelWarning, canonical_viseme_timeline, check_map_against,
-                              load_map, load_phoneset, map_timeline, resolve_visemes)
-from lipsync.timeline import Segment, Timeline
+from lipsync.phonetics.phonemes import MAPS, UnknownLabelWarning, canonical_viseme_timeline, check_map_against, load_map, load_phoneset, map_timeline, resolve_visemes
+from lipsync.motion.timeline import Segment, Timeline
 
 RHUBARB = list("ABCDEFGHX")
 OCULUS = "sil PP FF TH DD kk CH SS nn RR aa E I O U".split()

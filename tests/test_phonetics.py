@@ -10,12 +10,12 @@ import pytest
 
 from lipsync import phonetics
 from lipsync.errors import MapError
-from lipsync.phonemes import UnknownLabelWarning, bank_viseme_timeline, load_map, map_timeline
+from lipsync.phonetics.phonemes import UnknownLabelWarning, bank_viseme_timeline, load_map, map_timeline
 from lipsync.phonetics.features import FEATURES
 from lipsync.phonetics.segments import parse_sequence
 from lipsync.phonetics.visemes import compiled, parts_visemes
 from lipsync.readers import read_timeline
-from lipsync.timeline import Segment, Timeline
+from lipsync.motion.timeline import Segment, Timeline
 
 ROOT = Path(__file__).resolve().parent.parent
 DATA = ROOT / "tests" / "data" / "phonetics"

@@ -116,7 +116,7 @@ def test_render_clip_and_server_from_a_plain_script(workdir, tmp_path):
     bank = tmp_path / "toon"
     shutil.copytree(workdir / "visemes" / "toon", bank, ignore=shutil.ignore_patterns(".lipsync"))
     body = textwrap.dedent(f"""
-        from lipsync.clip import render_clip
+        from lipsync.pipeline.clip import render_clip
         render_clip("samples/hello.phn", {str(tmp_path / 'out.mp4')!r}, bank={str(bank)!r}, quiet=True)
         import os
         assert os.path.getsize({str(tmp_path / 'out.mp4')!r}) > 1000

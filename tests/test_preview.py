@@ -1,4 +1,4 @@
-"""lipsync.preview: lines drawn where they are, grid geometry, atomic PNG writing."""
+"""lipsync.encode.preview: lines drawn where they are, grid geometry, atomic PNG writing."""
 
 from __future__ import annotations
 
@@ -8,8 +8,8 @@ import cv2
 import numpy as np
 import pytest
 
-from lipsync import preview
-from lipsync.preview import GAP, draw_lines, preview_sheet, save_png, strip
+from lipsync.encode import preview
+from lipsync.encode.preview import GAP, draw_lines, preview_sheet, save_png, strip
 
 
 def _blank(h=64, w=64):

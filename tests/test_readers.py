@@ -17,8 +17,8 @@ import pytest
 from hypothesis import given, settings, strategies as st
 
 from lipsync.errors import InputError, TimelineError, UnknownNameError
-from lipsync.phonemes import load_map, map_timeline, unknown_labels
-from lipsync.timeline import Segment, Timeline
+from lipsync.phonetics.phonemes import load_map, map_timeline, unknown_labels
+from lipsync.motion.timeline import Segment, Timeline
 from lipsync.readers import READERS, read_timeline
 
 DATA = Path(__file__).parent / "data"

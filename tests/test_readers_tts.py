@@ -15,10 +15,10 @@ import pytest
 
 from lipsync.cli import main
 from lipsync.errors import TimelineError
-from lipsync.phonemes import load_map
+from lipsync.phonetics.phonemes import load_map
 from lipsync.speech.lexicon import normalise_transcript, pronounce
 from lipsync.speech.phonetise import phones_of, split_word, words_to_phones
-from lipsync.timeline import Segment, Timeline
+from lipsync.motion.timeline import Segment, Timeline
 from lipsync.readers import read_timeline
 
 TIMELINES = Path(__file__).parent / "data" / "timelines"
@@ -289,7 +289,7 @@ def test_cues_from_polly_marks(tmp_path):
 
 
 def _shape_frames(tl, duration, step=0.01):
-    from lipsync.phonemes import map_timeline
+    from lipsync.phonetics.phonemes import map_timeline
 
     n = int(duration / step)
     out = ["X"] * n

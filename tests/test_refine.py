@@ -14,13 +14,13 @@ import cv2
 import numpy as np
 import pytest
 
-from lipsync import refine as R
-from lipsync.bank import Bank
+from lipsync.morphing import refine as R
+from lipsync.banks.bank import Bank
 from lipsync.errors import BankError
-from lipsync.flows import pair_flows
-from lipsync.preprocess import bank_pair_flows
-from lipsync.normalise import normalise
-from lipsync.store import FlowStore
+from lipsync.morphing.flows import pair_flows
+from lipsync.morphing.preprocess import bank_pair_flows
+from lipsync.morphing.normalise import normalise
+from lipsync.morphing.store import FlowStore
 
 GRID = Path(__file__).parent / "data" / "grid-s1"
 

@@ -9,11 +9,12 @@ import numpy as np
 import pytest
 
 import synthetic
-from lipsync import flows, render as render_mod
-from lipsync.bank import Bank
+from lipsync.morphing import flows
+from lipsync.morphing import render as render_mod
+from lipsync.banks.bank import Bank
 from lipsync.errors import InputError
-from lipsync.render import METHODS, Renderer, morph
-from lipsync.warp import identity_grid
+from lipsync.morphing.render import METHODS, Renderer, morph
+from lipsync.morphing.warp import identity_grid
 
 METHOD_NAMES = METHODS.names()
 
@@ -30,7 +31,7 @@ def line_bank(synthetic_bank_dir, tmp_path_factory):
     """The same subject with ``refine: false``: its flows are the Beier-Neely line flows alone.
 
     The inverse-table solver's accuracy is pinned on these smooth fields, as it was written
-    for them; refined flows (a bank's default, lipsync.refine) are optical flow's, a little
+    for them; refined flows (a bank's default, lipsync.morphing.refine) are optical flow's, a little
     rougher, and have their own bounds (test_tables_of_refined_flows).
     """
     d = tmp_path_factory.mktemp("render") / "lines"
@@ -68,7 +69,7 @@ def test_quality_against_the_true_in_between(bank, line_bank):
     # over alpha 0.25, 0.5, 0.75. Measured with the line flows alone (refine: false): flow
     # and splat 0.1-0.2 dB below beier-neely on X-O and A-E, 1.0 dB on O-E (interpolating a
     # flow is not re-warping to interpolated lines); all 2.5-4 dB above dissolve. Refined
-    # (the default, lipsync.refine): flow 32.8 / 39.2 / 35.6 dB against 29.5 / 31.6 / 30.0
+    # (the default, lipsync.morphing.refine): flow 32.8 / 39.2 / 35.6 dB against 29.5 / 31.6 / 30.0
     # dB on the line flows alone, +5.6 dB overall (optical flow follows the mouth's colour
     # ramp, which the lines do not describe).
     renderers = {m: Renderer(bank, method=m) for m in METHOD_NAMES}

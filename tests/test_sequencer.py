@@ -8,10 +8,9 @@ import random
 import pytest
 
 from lipsync.errors import InputError
-from lipsync.sequencer import (HOLD_HALF_WIDTH_S, MAX_HELD_PAUSE_S, MAX_TRANSITION_S, MIN_SEGMENT_S, RULES,
-                               FrameSpec, frame_count, plan_segments, plan_transitions, sequence)
-from lipsync.timeline import Segment, Timeline
-from lipsync.timing import get_curve
+from lipsync.motion.sequencer import HOLD_HALF_WIDTH_S, MAX_HELD_PAUSE_S, MAX_TRANSITION_S, MIN_SEGMENT_S, RULES, FrameSpec, frame_count, plan_segments, plan_transitions, sequence
+from lipsync.motion.timeline import Segment, Timeline
+from lipsync.motion.timing import get_curve
 
 REST = "X"
 

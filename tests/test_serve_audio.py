@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from lipsync.live.offline import live_specs
+from lipsync.pipeline.liveclip import live_specs
 from lipsync.server.protocol import HEADER, MAX_AUDIO_MESSAGE_S
 from lipsync.speech.audio import load_audio
 

@@ -4,7 +4,7 @@ Chromium's fake capture device plays a GRID sentence (tests/data/grid-s1-audio, 
 as the microphone (``--use-file-for-fake-audio-capture``); the page captures it with an
 AudioWorklet, streams 16-bit PCM at the context's rate (48 kHz) and receives frames with
 their specs. They are compared with ``lipsync render --live`` of the same file
-(:func:`lipsync.live.offline.live_specs`), aligned by the shift of at most
+(:func:`lipsync.pipeline.liveclip.live_specs`), aligned by the shift of at most
 :data:`MAX_SHIFT` frames at which they agree best (capture starts a few ms into the file or
 after a few ms of nothing; the test prints the shift) and compared frame by frame by the
 mouth shape each shows. Chromium resamples the 16 kHz file to the device rate and the server
@@ -25,7 +25,7 @@ import numpy as np
 import pytest
 
 from lipsync.live import LiveAnimator
-from lipsync.live.offline import live_specs
+from lipsync.pipeline.liveclip import live_specs
 from lipsync.speech.audio import load_audio
 
 from test_serve_browser import CHROMIUM, DRIVER

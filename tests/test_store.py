@@ -9,11 +9,11 @@ import cv2
 import numpy as np
 import pytest
 
-from lipsync.bank import Bank
-from lipsync.normalise import normalise
-from lipsync.preprocess import all_pairs, bank_pair_flows, preprocess
-from lipsync.render import Renderer
-from lipsync.store import FlowStore, StoreWarning, _read_flat_entry, apply_deadzone
+from lipsync.banks.bank import Bank
+from lipsync.morphing.normalise import normalise
+from lipsync.morphing.preprocess import all_pairs, bank_pair_flows, preprocess
+from lipsync.morphing.render import Renderer
+from lipsync.morphing.store import FlowStore, StoreWarning, _read_flat_entry, apply_deadzone
 
 
 @pytest.fixture()
@@ -147,7 +147,7 @@ def test_a_damaged_table_or_field_is_a_miss(bank_dir, member):
 
 
 def test_entries_of_an_older_format_are_misses(bank_dir, monkeypatch):
-    from lipsync import store as store_mod
+    from lipsync.morphing import store as store_mod
 
     bank = Bank.load(bank_dir)
     store = FlowStore(bank_dir / "store")

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from lipsync.errors import UnknownNameError
-from lipsync.timing import CURVES, DEFAULT_CURVE, get_curve
+from lipsync.motion.timing import CURVES, DEFAULT_CURVE, get_curve
 
 T = np.linspace(0.0, 1.0, 2001)
 

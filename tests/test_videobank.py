@@ -16,7 +16,7 @@ import cv2
 import numpy as np
 import pytest
 
-from lipsync.bank import Bank
+from lipsync.banks.bank import Bank
 from lipsync.cli import main
 from lipsync.errors import InputError
 from lipsync.face import measure as M
@@ -176,7 +176,7 @@ def test_bank_from_video_loads_and_is_complete(made, tmp_path):
     assert (w, h) == result.size and w % 2 == 0 and h % 2 == 0
     assert main(["check", str(result.path)]) == 0
     # every flow is there: rendering computes nothing
-    from lipsync.preprocess import preprocess
+    from lipsync.morphing.preprocess import preprocess
 
     assert preprocess(bank, quiet=True, jobs=1).computed == 0
     report = json.loads((result.path / "init-report.json").read_text())
@@ -267,7 +267,7 @@ def test_pictures_span_the_speakers_range(made, mesh):
     PNGs against every candidate frame's opening, the candidates found from GRID's own word
     alignment (not lipsync's aligner, which chose the pictures)."""
     from lipsync.face.track import track_video
-    from lipsync.phonemes import load_map
+    from lipsync.phonetics.phonemes import load_map
     from lipsync.readers.grid import read_words
     from lipsync.speech.phonetise import words_to_phones
     from lipsync.videobank.select import candidates
@@ -365,7 +365,7 @@ def test_pictures_are_stabilised_onto_one_pose(made, mesh):
 
 
 def test_render_with_the_bank_follows_the_speech(made, tmp_path, mesh):
-    from lipsync.clip import render_clip
+    from lipsync.pipeline.clip import render_clip
     from lipsync.face.track import track_frames
     from lipsync.face.video import probe_video, read_video
     from lipsync.speech.align import align
@@ -485,12 +485,12 @@ def test_cli_refuses_before_any_work(tmp_path, capsys):
 
 
 def test_cli_interrupted_leaves_no_bank(tmp_path, monkeypatch, capsys):
-    import lipsync.preprocess
+    import lipsync.morphing.preprocess
 
     def interrupted(*a, **k):
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(lipsync.preprocess, "preprocess", interrupted)
+    monkeypatch.setattr(lipsync.morphing.preprocess, "preprocess", interrupted)
     (tmp_path / "in").mkdir()
     video = tmp_path / "in" / "bbwm5s.mpg"
     video.symlink_to(GRID / "bbwm5s.mpg")
@@ -505,7 +505,7 @@ def test_cli_interrupted_leaves_no_bank(tmp_path, monkeypatch, capsys):
 def test_record_script_shows_every_viseme_of_both_maps():
     from collections import Counter
 
-    from lipsync.phonemes import load_map
+    from lipsync.phonetics.phonemes import load_map
     from lipsync.speech.lexicon import lookup_missing
     from lipsync.speech.phonetise import phones_of, typical_duration
     from lipsync.speech.text import normalise_transcript

@@ -5,7 +5,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from lipsync.warp import beier_neely_displacement, beier_neely_map, identity_grid, warp
+from lipsync.morphing.warp import beier_neely_displacement, beier_neely_map, identity_grid, warp
 
 
 def perp(v):
@@ -126,7 +126,7 @@ def test_kernels_agree_and_threads_do_not_change_the_field():
 
 
 def test_blocks_cover_every_column(monkeypatch):
-    import lipsync.warp as w
+    import lipsync.morphing.warp as w
 
     rng = np.random.default_rng(3)
     dst = rng.uniform(0, 30, (4, 2, 2))

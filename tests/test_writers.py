@@ -17,8 +17,8 @@ import pytest
 from hypothesis import given, settings, strategies as st
 
 from lipsync.errors import InputError, UnknownNameError
-from lipsync.phonemes import canonical_viseme_timeline, load_map
-from lipsync.timeline import Segment, Timeline
+from lipsync.phonetics.phonemes import canonical_viseme_timeline, load_map
+from lipsync.motion.timeline import Segment, Timeline
 from lipsync.readers import read_timeline
 from lipsync.writers import WRITERS, cue_track, format_for, write_cues
 from lipsync.writers.moho import frame_of

@@ -8,9 +8,9 @@ import imageio_ffmpeg
 import numpy as np
 import pytest
 
-from lipsync import yuv
+from lipsync.encode import yuv
 from lipsync.encode import open_writer
-from lipsync.yuv import rgb_to_yuv420p, yuv420p_size
+from lipsync.encode.yuv import rgb_to_yuv420p, yuv420p_size
 
 # Flat colours: primaries, secondaries, the range ends, grey and two mid-tones.
 PATCHES = [(255, 0, 0), (0, 255, 0), (0, 0, 255), (0, 255, 255), (255, 0, 255), (255, 255, 0),
@@ -128,9 +128,9 @@ def test_docstring_examples_run():
 
 
 def test_compiled_and_numba_conversions_give_the_same_bytes():
-    pytest.importorskip("lipsync._flowkernel")
-    from lipsync._numba_kernels import rgb_to_yuv420p as numba_convert
-    from lipsync.yuv import _NUMBA_CONSTANTS
+    pytest.importorskip("lipsync.morphing._flowkernel")
+    from lipsync.morphing._numba_kernels import rgb_to_yuv420p as numba_convert
+    from lipsync.encode.yuv import _NUMBA_CONSTANTS
 
     rng = np.random.default_rng(7)
     for h, w in ((2, 2), (38, 62), (144, 256)):

@@ -26,7 +26,7 @@ from lipsync.bench import grid
 from lipsync.cli import main as lipsync
 from lipsync.face.track import track_frames
 from lipsync.face.video import read_video
-from lipsync.preview import save_png, strip
+from lipsync.encode.preview import save_png, strip
 
 ROOT = Path(__file__).resolve().parents[1]
 #: The dubbed video (A) and the sentence whose sound drives render and dub (B).

@@ -54,7 +54,7 @@ def _render_stats(video: Path, bank_dir: Path) -> dict:
     from lipsync.face import measure as M
     from lipsync.face.track import track_frames
     from lipsync.face.video import read_video
-    from lipsync.phonemes import DEFAULT_MAP, load_map
+    from lipsync.phonetics.phonemes import DEFAULT_MAP, load_map
 
     from lipsync.face.video import probe_video
 

@@ -34,7 +34,7 @@ def timeline_files():
 
 
 def cues(path: Path):
-    from lipsync.phonemes import load_map, map_timeline
+    from lipsync.phonetics.phonemes import load_map, map_timeline
     from lipsync.readers import read_timeline
 
     try:
@@ -61,7 +61,7 @@ def main(argv):
             result[str(path.relative_to(ROOT))] = got
     # Every label the English phone set knows (ARPAbet with and without stress, TIMIT, MFA's
     # English IPA), one at a time, through both maps.
-    from lipsync.phonemes import load_map, load_phoneset
+    from lipsync.phonetics.phonemes import load_map, load_phoneset
 
     ps = load_phoneset("english")
     labels = sorted(set(ps.phones) | set(ps.aliases) | {p + d for p in ps.phones for d in "012"}

@@ -15,10 +15,10 @@ from pathlib import Path
 
 import numpy as np
 
-from lipsync.animator import Animator
+from lipsync.pipeline.animator import Animator
 from lipsync.cli import main as lipsync
 from lipsync.face.video import read_video
-from lipsync.preview import save_png, strip
+from lipsync.encode.preview import save_png, strip
 
 ROOT = Path(__file__).resolve().parents[1]
 #: Frames shown, and every how many frames of the speech.

@@ -92,7 +92,7 @@ def api_page() -> str:
     lines = ["# API reference", "",
              "Everything `import lipsync` offers, from the docstrings (numpydoc). The names below "
              "are imported from the top level (`from lipsync import Bank`); the modules after "
-             "them are the public submodules (`lipsync.warp`, ...). Generated when the site is "
+             "them are the public submodules (`lipsync.morphing.warp`, ...). Generated when the site is "
              "built from `lipsync._EXPORTS` and `lipsync._SUBMODULES`.", "",
              "## Top-level names", "", "```{eval-rst}", ".. currentmodule:: lipsync", ""]
     for name in names:
@@ -109,9 +109,16 @@ def api_page() -> str:
 
 
 def module_page(module: str) -> str:
-    """One public submodule: its docstring and its public members (``__all__`` where it has one)."""
-    return "\n".join([f"# lipsync.{module}", "", "```{eval-rst}", f".. automodule:: lipsync.{module}",
-                      "   :members:", "```", ""])
+    """One public submodule: its docstring and its public members (``__all__`` where it has one).
+
+    ``lipsync.NAME`` may be a module that moved into a room (``lipsync.warp`` is
+    ``lipsync.morphing.warp``): it is documented where it lives, under both names."""
+    import importlib
+
+    real = importlib.import_module(f"lipsync.{module}").__name__
+    moved = [] if real == f"lipsync.{module}" else [f"(`lipsync.{module}` is `{real}`.)", ""]
+    return "\n".join([f"# lipsync.{module}", ""] + moved + ["```{eval-rst}", f".. automodule:: {real}",
+                                                           "   :members:", "```", ""])
 
 
 # --- benchmarks --------------------------------------------------------------------------------

@@ -1,7 +1,7 @@
 """Rendering an atlas: every viseme and N in-betweens of each pair, cropped to what changes.
 
 Stages, on what ``lipsync render`` uses: the bank, its flow store (missing flows computed
-first, as ``render`` does), the :class:`~lipsync.render.Renderer` for every cell, then
+first, as ``render`` does), the :class:`~lipsync.morphing.render.Renderer` for every cell, then
 :mod:`.layout` for the texture. Pairs come from timelines through the same reader, map and
 sequencer stages as ``render`` (:func:`pairs_in_plan` of the sequencer's plan), or are all
 pairs of the bank.
@@ -64,7 +64,7 @@ def bank_pairs(names: Sequence[str]) -> List[Tuple[str, str]]:
 def pairs_in_plan(plan: Iterable[Tuple[float, float, str]], names: Sequence[str]) -> List[Tuple[str, str]]:
     """The pairs a planned track morphs between (each boundary of the sequencer's plan).
 
-    The plan (:func:`lipsync.sequencer.plan_segments`) does not depend on the frame rate, so
+    The plan (:func:`lipsync.motion.sequencer.plan_segments`) does not depend on the frame rate, so
     neither does the atlas. Pairs are ordered as the bank orders its visemes.
 
     Examples
@@ -86,7 +86,7 @@ def pairs_in_specs(specs: Iterable, names: Sequence[str]) -> List[Tuple[str, str
 
     Examples
     --------
-    >>> from lipsync.sequencer import FrameSpec
+    >>> from lipsync.motion.sequencer import FrameSpec
     >>> pairs_in_specs([FrameSpec("X", "X", 0.0), FrameSpec("X", "A", 0.4), FrameSpec("D", "A", 0.5)], "ADX")
     [('A', 'X'), ('A', 'D')]
     """
@@ -179,10 +179,10 @@ def build_atlas(bank, *, pairs: Union[str, Iterable[Tuple[str, str]]] = "all", i
     """
     from tqdm import tqdm
 
-    from ..bank import Bank
-    from ..preprocess import all_pairs, preprocess
-    from ..render import Renderer
-    from ..store import FlowStore
+    from ..banks.bank import Bank
+    from ..morphing.preprocess import all_pairs, preprocess
+    from ..morphing.render import Renderer
+    from ..morphing.store import FlowStore
 
     if not isinstance(bank, Bank):
         bank = Bank.load(bank)

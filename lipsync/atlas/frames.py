@@ -68,7 +68,7 @@ def quantise(atlas: Atlas, specs: Sequence) -> Tuple[List[int], List[Tuple[str, 
 
     Examples
     --------
-    >>> from lipsync.sequencer import FrameSpec
+    >>> from lipsync.motion.sequencer import FrameSpec
     >>> from lipsync.atlas.schema import Cell
     >>> atlas = Atlas(image="m.png", image_size=(2, 1), base=None, frame_size=(1, 1), region=(0, 0, 1, 1),
     ...               scale=1.0, padding=0, bank="b", rest="A", visemes=("A", "B"), method="flow",

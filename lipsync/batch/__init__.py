@@ -9,7 +9,7 @@ One module per stage, each stage once:
 * :mod:`.bankpack` -- banks travel by content: packed on the client, unpacked once per
   worker machine into a local cache, loaded once per worker process;
 * :mod:`.worker` -- the tasks: one per viseme pair (flows computed once per cluster,
-  shipped to the workers that need them) and one per clip (:func:`lipsync.clip.render_clip`,
+  shipped to the workers that need them) and one per clip (:func:`lipsync.pipeline.clip.render_clip`,
   the pipeline of ``lipsync render``);
 * :mod:`.run` -- the client: connect (a LocalCluster on 127.0.0.1 or a running scheduler),
   submit through a bounded window, write outputs atomically, report.

@@ -7,8 +7,8 @@ their sha256 ``digest``. The toon packs to 0.76 MB, its decoded pixels would be 
 On a worker, :func:`local_bank` unpacks a pack into ``<cache>/banks/<digest>`` (a
 temporary folder renamed into place, so concurrent workers on one machine agree and a
 killed worker leaves no half bank), checks the files against the digest once per process
-(a damaged folder is unpacked again), loads the :class:`~lipsync.bank.Bank` once per
-process and keeps it, with the machine's shared :class:`~lipsync.store.FlowStore` at
+(a damaged folder is unpacked again), loads the :class:`~lipsync.banks.bank.Bank` once per
+process and keeps it, with the machine's shared :class:`~lipsync.morphing.store.FlowStore` at
 ``<cache>/store`` (flow keys are content hashes, so one store serves every bank).
 """
 
@@ -72,7 +72,7 @@ def pack_bank(folder) -> BankPack:
     >>> pack.files[0][0], len(pack.files), len(pack.digest)
     ('bank.yaml', 10, 64)
     """
-    from ..bank import Bank, _read_yaml
+    from ..banks.bank import Bank, _read_yaml
 
     bank = Bank.load(folder)
     folder = bank.path
@@ -113,8 +113,8 @@ class LocalBank:
     _normalised: object = None
 
     def normalised(self):
-        """The bank normalised (:func:`lipsync.normalise.normalise`), once per process."""
-        from ..normalise import normalise
+        """The bank normalised (:func:`lipsync.morphing.normalise.normalise`), once per process."""
+        from ..morphing.normalise import normalise
 
         with self.lock:
             if self._normalised is None:
@@ -179,8 +179,8 @@ def local_bank(pack: BankPack, cache: Optional[os.PathLike] = None) -> LocalBank
     >>> lb.bank.name, lb.folder.name == pack_bank(default_bank_dir()).digest
     ('toon', True)
     """
-    from ..bank import Bank
-    from ..store import FlowStore
+    from ..banks.bank import Bank
+    from ..morphing.store import FlowStore
 
     cache = Path(cache) if cache is not None else default_cache_dir()
     key = (str(cache), pack.digest)

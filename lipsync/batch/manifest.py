@@ -24,7 +24,7 @@ from typing import Dict, List, Optional, Tuple, Union
 
 from .._files import read_input_bytes
 from ..errors import InputError
-from ..frames import DEFAULT_FPS
+from ..motion.frames import DEFAULT_FPS
 
 PathLike = Union[str, "os.PathLike[str]"]
 
@@ -216,12 +216,12 @@ def read_manifest(path: PathLike, outdir: Optional[PathLike] = None) -> List[Cli
     [(2, 'a.tsv', 'one.mp4', 30.0)]
     """
     from .._data import default_bank_dir, shipped_banks
-    from ..bank import Bank
+    from ..banks.bank import Bank
     from ..encode import format_for
-    from ..phonemes import DEFAULT_MAP, MAPS, load_map
-    from ..render import METHODS
-    from ..sequencer import check_fps
-    from ..timing import CURVES, MODELS, timing_names
+    from ..phonetics.phonemes import DEFAULT_MAP, MAPS, load_map
+    from ..morphing.render import METHODS
+    from ..motion.sequencer import check_fps
+    from ..motion.timing import CURVES, MODELS, timing_names
 
     path = Path(path)
     data = read_input_bytes(path, "a manifest", limit=MAX_MANIFEST_BYTES, missing="no such manifest")

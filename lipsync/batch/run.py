@@ -408,7 +408,7 @@ def _execute(client, jobs: List[ClipJob], todo: List[int], keys: List[str], pack
     from distributed import as_completed
 
     from .. import __version__
-    from ..preprocess import all_pairs
+    from ..morphing.preprocess import all_pairs
 
     needed = {jobs[i].bank for i in todo}
     pack_futures = {}

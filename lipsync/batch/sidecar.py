@@ -17,7 +17,7 @@ import os
 from pathlib import Path
 from typing import Optional
 
-from ..clip import DEFAULT_CRF, DEFAULT_PRESET
+from ..pipeline.clip import DEFAULT_CRF, DEFAULT_PRESET
 from .manifest import SIDECAR_SUFFIX, ClipJob
 
 _CHUNK = 1 << 20

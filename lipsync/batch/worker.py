@@ -8,7 +8,7 @@ workers have the package installed can run a batch.
   there from an earlier batch) and returns the store entry's bytes. Each pair runs once per
   cluster; dask copies the results to the workers whose clips need them.
 * :func:`clip_task` installs the shipped entries this machine lacks, writes the inputs
-  into a temporary folder and calls :func:`lipsync.clip.render_clip` (the same pipeline as
+  into a temporary folder and calls :func:`lipsync.pipeline.clip.render_clip` (the same pipeline as
   ``lipsync render``), then returns the mp4's bytes. Errors are returned, not raised, so a
   bad clip is a report row and dask does not retry it.
 """
@@ -28,7 +28,7 @@ from .bankpack import BankPack, default_cache_dir, install_entries, local_bank
 
 @dataclass(frozen=True)
 class TimelineOptions:
-    """Reader options passed to :func:`lipsync.clip.render_clip` (``timeline_options``).
+    """Reader options passed to :func:`lipsync.pipeline.clip.render_clip` (``timeline_options``).
 
     ``text`` is the transcript for audio input (the audio reader reads it); the others are
     the readers' defaults, which a manifest does not change.
@@ -99,7 +99,7 @@ def pair_task(pack: BankPack, a: str, b: str, cache: Optional[str] = None) -> Tu
     >>> len(key), data[:2]
     (64, b'PK')
     """
-    from ..preprocess import _compute_pair
+    from ..morphing.preprocess import _compute_pair
 
     local = local_bank(pack, cache)
     bank, store = local.bank, local.store
@@ -135,7 +135,7 @@ def clip_task(task: ClipTask, pack: BankPack, entries: List[Tuple[str, bytes]],
     >>> import tempfile
     >>> from lipsync._data import default_bank_dir
     >>> from lipsync.batch import pack_bank
-    >>> from lipsync.preprocess import all_pairs
+    >>> from lipsync.morphing.preprocess import all_pairs
     >>> pack, cache = pack_bank(default_bank_dir()), tempfile.mkdtemp()
     >>> entries = [pair_task(pack, a, b, cache) for a, b in all_pairs(pack.names)]  # doctest: +SKIP
     >>> cues = b"0.00\\tX\\n0.40\\tD\\n0.80\\tX\\n"
@@ -146,7 +146,7 @@ def clip_task(task: ClipTask, pack: BankPack, entries: List[Tuple[str, bytes]],
     (True, 20, b'ftyp')
     """
     from .. import __version__
-    from ..clip import render_clip
+    from ..pipeline.clip import render_clip
 
     t0 = time.perf_counter()
     result = {"line": task.line, "version": __version__, "host": os.uname().nodename, "pid": os.getpid()}

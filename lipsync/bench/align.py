@@ -83,7 +83,7 @@ def boundary_stats(ours, ref):
 
 def frame_agreement(ours, ref, duration):
     """Share of 10 ms frames whose Rhubarb mouth shape (english-to-rhubarb map) is the same."""
-    from ..phonemes import load_map, map_timeline
+    from ..phonetics.phonemes import load_map, map_timeline
 
     pmap = load_map("english-to-rhubarb")
     centres = (np.arange(int(round(duration * 100))) + 0.5) / 100
@@ -189,7 +189,7 @@ def _fit_check_speed(pcm, transcript, seconds, repeat) -> dict:
 def _align(ctx: Context, rows: List[dict]) -> None:
     from ..speech.align import align_samples
     from ..speech.audio import load_audio
-    from ..timeline import Segment, Timeline
+    from ..motion.timeline import Segment, Timeline
     from ..readers import read_timeline
 
     wav, lab, grid = (ctx.mfa / f"acoustic_corpus.{ext}" for ext in ("wav", "lab", "TextGrid"))

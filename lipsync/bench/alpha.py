@@ -46,10 +46,10 @@ def _cpu() -> float:
 
 
 def bench_alpha_frames(rows: List[dict], banks: Dict[str, Path], tmp: Path, quick: bool) -> None:
-    from ..bank import Bank
-    from ..preprocess import preprocess
-    from ..render import Renderer, available_kernels
-    from ..store import FlowStore
+    from ..banks.bank import Bank
+    from ..morphing.preprocess import preprocess
+    from ..morphing.render import Renderer, available_kernels
+    from ..morphing.store import FlowStore
 
     pairs = [("X", "D"), ("A", "C"), ("B", "F"), ("E", "H")]
     alphas = np.linspace(0.1, 0.9, 3 if quick else 7)
@@ -100,10 +100,10 @@ def bench_alpha_frames(rows: List[dict], banks: Dict[str, Path], tmp: Path, quic
 
 
 def bench_alpha_encode(rows: List[dict], banks: Dict[str, Path], tmp: Path, quick: bool) -> None:
-    from ..alpha import flatten
-    from ..bank import Bank
+    from ..morphing.alpha import flatten
+    from ..banks.bank import Bank
     from ..encode import open_writer
-    from ..render import Renderer
+    from ..morphing.render import Renderer
 
     label = "512x512"
     twin = tmp / f"rgba-{label}"

@@ -23,11 +23,11 @@ ROOT = Path(__file__).resolve().parents[2]
 
 def bench_atlas(rows: List[dict], quick: bool) -> None:
     from .._data import default_bank_dir
-    from ..animator import Animator
+    from ..pipeline.animator import Animator
     from ..atlas.build import build_atlas, pairs_in_plan
     from ..atlas.frames import quantise
-    from ..bank import Bank
-    from ..sequencer import plan_segments
+    from ..banks.bank import Bank
+    from ..motion.sequencer import plan_segments
 
     bank = Bank.load(default_bank_dir())
     for name in ("hello",) if quick else ("hello", "balloons"):

@@ -64,11 +64,11 @@ def bench_batch(rows: List[dict], tmp: Path, quick: bool) -> None:
     import os
 
     from .._data import default_bank_dir
-    from ..bank import Bank
+    from ..banks.bank import Bank
     from ..batch import connect, pack_bank, read_manifest, run_batch
-    from ..clip import render_clip
-    from ..preprocess import preprocess
-    from ..store import FlowStore
+    from ..pipeline.clip import render_clip
+    from ..morphing.preprocess import preprocess
+    from ..morphing.store import FlowStore
 
     n = 4 if quick else 12
     manifest = write_clips(tmp / "batch-clips", n)
@@ -109,7 +109,7 @@ def bench_batch(rows: List[dict], tmp: Path, quick: bool) -> None:
     for workers in (1, 2):
         t = time.perf_counter()
         with connect(workers=workers) as (client, _):
-            client.run(lambda: __import__("lipsync.clip"))
+            client.run(lambda: __import__("lipsync.pipeline.clip"))
             startup = time.perf_counter() - t
             cpu0 = sum(client.run(worker_cpu).values())
             r = run_batch(manifest, tmp / f"batch-out-{workers}", scheduler=client.scheduler.address,

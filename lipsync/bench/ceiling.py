@@ -3,7 +3,7 @@
 Issue 21 asks an ideal bank (each viseme the speaker's median lip opening) driven by the
 timing model to follow the real lips at r >= 0.88 on held-out GRID sentences. Its premise is
 that the timing model is the cap. This figure measures the cap of the *shapes*: the same
-dominance timing (:data:`lipsync.coarticulation.DEFAULT_PARAMS`, full blend of every
+dominance timing (:data:`lipsync.motion.coarticulation.DEFAULT_PARAMS`, full blend of every
 segment's weight, not projected onto two visemes), the same held-out sentences and
 lipsync's aligned phones (:mod:`lipsync.bench.coarticulation`), with each segment's opening
 chosen in ways a bank of one picture per viseme could and could not follow:
@@ -50,7 +50,7 @@ class _Clip:
     real opening on the frames where the face was found."""
 
     def __init__(self, name: str, pmap):
-        from .. import coarticulation as co
+        from ..motion import coarticulation as co
 
         real = G.real_measures(name)["opening"]
         classes = co.viseme_classes(pmap)
@@ -78,7 +78,7 @@ def _mean_r(clips: List[_Clip], values_of) -> float:
 
 
 def _fit_values(clips: List[_Clip], start: Dict[str, float]) -> Dict[str, float]:
-    from ..coarticulation import _nelder_mead
+    from ..motion.coarticulation import _nelder_mead
 
     names = sorted(start)
     x0 = np.array([start[n] for n in names])

@@ -7,20 +7,20 @@ shape taken from a bank: the *ideal bank* (each viseme the speaker's median meas
 the frames aligned to it in :data:`~lipsync.bench.grid.BANK_CLIPS`) or, when there is one,
 the real speaker's bank made by ``lipsync init --video`` (its images' measures, and frames
 actually rendered through the renderer and measured). predicted(t) is the from/to visemes'
-values blended by the frame's alpha (:func:`lipsync.coarticulation.predicted`). Phones come
+values blended by the frame's alpha (:func:`lipsync.motion.coarticulation.predicted`). Phones come
 from lipsync's aligner with the transcript (``align``, what ``lipsync render AUDIO --text``
 uses) or from GRID's own word alignments (``grid``).
 
 Timing models: ``today`` (the rule-based sequencer, default curve), ``cuts`` (the same
 track with no transitions: what Rhubarb-style tools show) and ``dominance`` (the default
-constants of :mod:`lipsync.coarticulation`, fitted on BANK_CLIPS). Every r is the mean over
+constants of :mod:`lipsync.motion.coarticulation`, fitted on BANK_CLIPS). Every r is the mean over
 clips of Pearson's r per clip; figures report the held-out clips (the 30 not in BANK_CLIPS)
 unless a column says otherwise.
 
 Figures (``python -m lipsync.bench --only NAME``):
 
 * ``coarticulation``: r and RMS error per measure, phone source and model; the refit of
-  the constants from :data:`~lipsync.coarticulation.START_PARAMS` (how they were made);
+  the constants from :data:`~lipsync.motion.coarticulation.START_PARAMS` (how they were made);
   what the breath before speech adds (``coarticulation_breath``: the same model without
   it); the issue's own measure reproduced (a real trajectory smoothed over ~2 frames);
   closures (share of P/B/M frames shown closed) and labiodentals (F/V frames where the G
@@ -30,7 +30,7 @@ Figures (``python -m lipsync.bench --only NAME``):
 * ``coarticulation_rendered``: with a bank made by ``lipsync init --video`` from BANK_CLIPS,
   held-out sentences rendered with each model, the face tracked on the rendered frames, lip
   opening correlated with the real speaker's; also with the constants fitted to the speaker
-  (:func:`lipsync.coarticulation.fit_speaker` on the bank clips and the bank's pictures).
+  (:func:`lipsync.motion.coarticulation.fit_speaker` on the bank clips and the bank's pictures).
 """
 
 from __future__ import annotations
@@ -57,14 +57,14 @@ ISSUE_SMOOTHING_FRAMES = 2.0
 
 
 def _pmap():
-    from ..phonemes import load_map
+    from ..phonetics.phonemes import load_map
 
     return load_map(MAP)
 
 
 def viseme_track(name: str, source: str, pmap=None):
     """The clip's phones mapped to the map's visemes (rest for silence)."""
-    from ..phonemes import map_timeline
+    from ..phonetics.phonemes import map_timeline
 
     pmap = pmap or _pmap()
     with warnings.catch_warnings():
@@ -103,8 +103,8 @@ def schedules(visemes, n: int, *, pmap=None, params=None, models=MODELS, fps: fl
               breath: bool = True) -> Dict[str, list]:
     """FrameSpecs of ``n`` frames of a viseme track for each timing model (``breath=False``:
     the dominance model without the breath before speech)."""
-    from ..coarticulation import DEFAULT_PARAMS, VisemeClasses, viseme_classes
-    from ..sequencer import sequence
+    from ..motion.coarticulation import DEFAULT_PARAMS, VisemeClasses, viseme_classes
+    from ..motion.sequencer import sequence
 
     pmap = pmap or _pmap()
     rest, closures = pmap.silence, pmap.closures
@@ -133,7 +133,7 @@ def _smooth(x: np.ndarray, sigma: float) -> np.ndarray:
 def _scores(clips, source: str, measure: str, values, *, params=None, sigma: float = 0.0, pmap=None,
             breath: bool = True):
     """Per model: list of (clip, r, rmse)."""
-    from ..coarticulation import predicted
+    from ..motion.coarticulation import predicted
 
     out: Dict[str, list] = {m: [] for m in MODELS}
     for c in clips:
@@ -153,7 +153,7 @@ def _mean(xs, i=1) -> float:
 
 
 def _refit(source: str, values, pmap):
-    from .. import coarticulation as co
+    from ..motion import coarticulation as co
 
     classes = co.viseme_classes(pmap)
     tracks = []
@@ -170,7 +170,7 @@ def _refit(source: str, values, pmap):
 def _short(params) -> str:
     """The constants on one line: lead, then class: dominance/anticipation ms/carry-over ms,
     and the breath's length."""
-    from ..coarticulation import CLASSES
+    from ..motion.coarticulation import CLASSES
 
     parts = [f"lead {1000 * params.lead:.0f} ms"]
     for c in CLASSES + ("breath",):
@@ -181,7 +181,7 @@ def _short(params) -> str:
 
 def _closures(clips, source: str, pmap) -> List[dict]:
     """Share of frames inside P/B/M shown exactly closed, and of F/V frames with G >= half."""
-    from ..coarticulation import viseme_classes
+    from ..motion.coarticulation import viseme_classes
 
     lips = {v for v, k in viseme_classes(pmap).items() if k == "labiodental"}
     rows = []
@@ -209,7 +209,7 @@ def _closures(clips, source: str, pmap) -> List[dict]:
 def _projection(clips, source: str, values, pmap) -> dict:
     """r of the full dominance blend (a renderer showing every viseme at once) against the
     projected two-viseme frames, and the weight the projection leaves out."""
-    from .. import coarticulation as co
+    from ..motion import coarticulation as co
 
     classes = co.viseme_classes(pmap)
     full, proj, lost = [], [], []
@@ -250,8 +250,8 @@ def _toon_rows() -> List[dict]:
     """On the drawn toon, the sample timelines: held frames (written again, not rendered),
     one-frame pops of a non-closure, and sequencing time per minute of speech."""
     from .._data import default_bank_dir
-    from ..animator import Animator, _still_key
-    from ..bank import Bank
+    from ..pipeline.animator import Animator, _still_key
+    from ..banks.bank import Bank
 
     root = Path(__file__).resolve().parents[2]
     files = [root / "samples" / "hello.phn", root / "samples" / "balloons.TextGrid",
@@ -289,8 +289,8 @@ def _lookahead_rows() -> List[dict]:
     frames equal offline ones on real timelines (the samples, MFA, a TTS file, the shipped
     GRID sentences)."""
     from .._data import default_bank_dir
-    from ..animator import Animator
-    from ..bank import Bank
+    from ..pipeline.animator import Animator
+    from ..banks.bank import Bank
     from ..live import LiveAnimator, replay_specs
 
     root = Path(__file__).resolve().parents[2]
@@ -325,7 +325,7 @@ def _lookahead_rows() -> List[dict]:
 
 @FIGURES.decorator("coarticulation")
 def figure(ctx: Context, rows: List[dict]) -> None:
-    from .. import coarticulation as co
+    from ..motion import coarticulation as co
 
     pmap = _pmap()
     held = G.held_out()
@@ -389,7 +389,7 @@ def bank_values(bank) -> Dict[str, float]:
 def _video_bank(ctx: Context):
     """The bank ``lipsync init --video`` makes from BANK_CLIPS (the videobank figure's, when
     it ran in this process; made here otherwise)."""
-    from ..bank import Bank
+    from ..banks.bank import Bank
     from ..videobank import make_bank
 
     out = ctx.tmp / "grid-s1"
@@ -403,9 +403,9 @@ def _video_bank(ctx: Context):
 
 
 def _fit_speaker(values, pmap):
-    """:func:`lipsync.coarticulation.fit_speaker` on the bank clips: their aligned visemes,
+    """:func:`lipsync.motion.coarticulation.fit_speaker` on the bank clips: their aligned visemes,
     real lip opening and the bank pictures' openings (what ``init --video`` could store)."""
-    from ..coarticulation import fit_speaker
+    from ..motion.coarticulation import fit_speaker
 
     recordings = [([(s.start, s.end, s.label) for s in viseme_track(c, "align", pmap)],
                    G.real_measures(c)["opening"], G.track(c).fps) for c in G.BANK_CLIPS]
@@ -414,7 +414,7 @@ def _fit_speaker(values, pmap):
 
 @FIGURES.decorator("coarticulation_rendered")
 def rendered_figure(ctx: Context, rows: List[dict]) -> None:
-    from .. import coarticulation as co
+    from ..motion import coarticulation as co
     from ..face.landmarks import FaceMesh
     from .videobank import judge_clip
 

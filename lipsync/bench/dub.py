@@ -120,9 +120,9 @@ def kept(out_frames, src_frames, rows: int, box: tuple) -> Dict[str, float]:
 
 
 def _quality(ctx: Context, bank_path: Path, rows: List[dict]) -> None:
-    from ..animator import Animator
-    from ..bank import Bank
-    from ..dubbing import dub
+    from ..pipeline.animator import Animator
+    from ..banks.bank import Bank
+    from ..pipeline.dubbing import dub
     from ..face.landmarks import FaceMesh
     from ..face.video import read_video
 
@@ -182,9 +182,9 @@ def _quality(ctx: Context, bank_path: Path, rows: List[dict]) -> None:
 def cost_per_frame(bank_path: Path, video: Path, speech: Path, text: str, repeat: int = 3) -> Dict[str, float]:
     """CPU ms per frame (one thread) of today's frame, render on the plate and a dub frame,
     and the stages of each, for ``speech`` rendered with ``bank_path`` and dubbed onto ``video``."""
-    from ..animator import Animator
-    from ..bank import Bank
-    from ..dubbing import bank_face, colour_table, plate_poses, video_track
+    from ..pipeline.animator import Animator
+    from ..banks.bank import Bank
+    from ..pipeline.dubbing import bank_face, colour_table, plate_poses, video_track
     from ..composite.plate import PlateCompositor
     from ..face.video import probe_video, read_video
     from ..speech.align import align

@@ -39,7 +39,7 @@ def editor_figure(ctx: Context, rows: List[dict]) -> None:
     import httpx
 
     from ..editor import server
-    from ..store import FlowStore
+    from ..morphing.store import FlowStore
     from ..web import Session, start_in_thread
 
     bank = shutil.copytree(default_bank_dir(), ctx.tmp / "editor-bank", ignore=shutil.ignore_patterns(".lipsync"))

@@ -13,7 +13,7 @@ more similar to the actual image" than the classic Beier–Neely morph. On GRID'
    Its lines come from the face room two ways: ``track`` -- :func:`lipsync.face.lines.face_features`
    on the video's tracked mesh (what ``lipsync init --video`` does) -- and ``init`` --
    ``lipsync init`` on a folder holding the two frames as photos (its own mesh on each,
-   :func:`lipsync.banks.init.init_bank`). ``symmetry: false`` in both: a real face is not a
+   :func:`lipsync.videobank.photos.init_bank`). ``symmetry: false`` in both: a real face is not a
    mirror image, and normalising would warp both pictures away from the real frames they
    are judged against -- every method would be judged on a face that is not the real one
    (``lipsync init`` turns symmetry on for some of GRID's frame pairs, whose faces are
@@ -136,7 +136,7 @@ def pair_bank(folder: Path, image_a: np.ndarray, image_b: np.ndarray, points_a: 
     with ``symmetry: false`` whatever init chose (the module docstring says why). ``refine``
     is written into bank.yaml. Returns ``(bank, whether lipsync init chose symmetry)``.
     """
-    from ..bank import Bank
+    from ..banks.bank import Bank
     from ..banks.yamlio import dump_bank, write_bank_text
 
     folder.mkdir(parents=True, exist_ok=True)
@@ -144,7 +144,7 @@ def pair_bank(folder: Path, image_a: np.ndarray, image_b: np.ndarray, points_a: 
     _write_png(folder / "X.png", image_a)
     _write_png(folder / "D.png", image_b)
     if lines == "init":
-        from ..banks.init import init_bank
+        from ..videobank.photos import init_bank
         from ..banks.yamlio import header_comments
         import yaml
 
@@ -186,8 +186,8 @@ def judge_pair(frames: Sequence[np.ndarray], points: np.ndarray, i: int, j: int,
                lines: str = "track", clip: str = "", timings: Optional[Dict[str, list]] = None) -> List[Judged]:
     """Every real frame strictly between ``i`` and ``j`` against every method's in-between."""
     from ..face.compare import mouth_box, psnr, ssim
-    from ..preprocess import preprocess
-    from ..render import Renderer
+    from ..morphing.preprocess import preprocess
+    from ..morphing.render import Renderer
 
     out: List[Judged] = []
     banks = {}
@@ -319,8 +319,8 @@ def _refine_speed(ctx: Context, rows: List[dict]) -> None:
                         for label, path in banks.items()}
             for label, path in variants.items():
                 t, c = time.perf_counter(), time.process_time()
-                from ..bank import Bank
-                from ..preprocess import all_pairs, preprocess
+                from ..banks.bank import Bank
+                from ..morphing.preprocess import all_pairs, preprocess
 
                 bank = Bank.load(path)
                 preprocess(bank, quiet=True)

@@ -157,14 +157,14 @@ def _cpu() -> float:
 
 
 def _pmap():
-    from ..phonemes import DEFAULT_MAP, load_map
+    from ..phonetics.phonemes import DEFAULT_MAP, load_map
 
     return load_map(DEFAULT_MAP)
 
 
 def frames(tl, pmap, duration: float) -> np.ndarray:
     """The mouth shape of each 25 fps frame (sampled at the frame's centre; silence: rest)."""
-    from ..phonemes import map_timeline
+    from ..phonetics.phonemes import map_timeline
 
     centres = (np.arange(int(round(duration * FPS))) + 0.5) / FPS
     out = np.full(len(centres), pmap.silence, dtype=object)
@@ -180,8 +180,8 @@ def shown(tl, pmap, duration: float) -> np.ndarray:
     """The viseme each 25 fps frame of the video shows most (of the two it morphs between,
     the one with the larger weight), as the renderer's sequencer plans it: it keeps every
     closure on at least one frame, however short (``closures`` of the map)."""
-    from ..phonemes import map_timeline
-    from ..sequencer import sequence
+    from ..phonetics.phonemes import map_timeline
+    from ..motion.sequencer import sequence
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
@@ -211,7 +211,7 @@ def closures_shown(truth, shown: np.ndarray, closed: Sequence[str]) -> Tuple[int
 
     Examples
     --------
-    >>> from lipsync.timeline import Segment, Timeline
+    >>> from lipsync.motion.timeline import Segment, Timeline
     >>> truth = Timeline((Segment(0.0, 0.1, "a"), Segment(0.1, 0.2, "m"), Segment(0.2, 0.3, "b"),
     ...                   Segment(0.3, 0.5, "a"), Segment(0.5, 0.56, "p")))
     >>> video = np.array(["D"] * 3 + ["A"] * 2 + ["D"] * 9, dtype=object)   # 25 fps
@@ -246,7 +246,7 @@ def _write_wav(path: Path, pcm: np.ndarray, rate: int) -> None:
 
 
 def _timeline(segments, duration: float):
-    from ..timeline import PHONEME, Segment, Timeline
+    from ..motion.timeline import PHONEME, Segment, Timeline
 
     return Timeline(tuple(Segment(a, b, l) for a, b, l in segments), kind=PHONEME, stated_end=duration)
 
@@ -421,8 +421,8 @@ def _real(ctx: Context, rows: List[dict]) -> None:
 
 def frames_notation(tl, pmap, duration: float) -> np.ndarray:
     """As :func:`frames` for a timeline in any notation (detected: the TextGrid's pinyin)."""
-    from ..phonemes import map_timeline
-    from ..timeline import Timeline
+    from ..phonetics.phonemes import map_timeline
+    from ..motion.timeline import Timeline
 
     centres = (np.arange(int(round(duration * FPS))) + 0.5) / FPS
     out = np.full(len(centres), pmap.silence, dtype=object)

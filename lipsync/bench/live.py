@@ -36,8 +36,8 @@ def _timeline(path):
 
 def bench_lookahead(rows: List[dict], ctx: Context) -> None:
     from .._data import default_bank_dir
-    from ..animator import Animator
-    from ..bank import Bank
+    from ..pipeline.animator import Animator
+    from ..banks.bank import Bank
     from ..live import LOOKAHEAD_S, LiveAnimator, replay_specs
 
     bank = Bank.load(default_bank_dir())
@@ -67,7 +67,7 @@ def _segments(bank, ctx: Context):
 def bench_latency(rows: List[dict], ctx: Context, banks) -> None:
     import cv2
 
-    from ..bank import Bank
+    from ..banks.bank import Bank
     from ..live import LiveAnimator
 
     for label, path in banks.items():
@@ -111,7 +111,7 @@ def bench_fps(rows: List[dict], ctx: Context, banks) -> None:
 
     import cv2
 
-    from ..bank import Bank
+    from ..banks.bank import Bank
     from ..live import LiveAnimator, RendererPool
 
     seconds = 4.0 if ctx.quick else 12.0
@@ -212,9 +212,9 @@ def _shape_track(specs) -> np.ndarray:
 def _offline_loop_specs(bank, pcm, n: int, timing=None):
     """Offline without a transcript: the same phone loop and gate over the whole file, then
     the offline sequencer (:class:`lipsync.Animator`)."""
-    from ..animator import Animator
+    from ..pipeline.animator import Animator
     from ..live.audio import offline_phones
-    from ..timeline import PHONEME, Segment, Timeline
+    from ..motion.timeline import PHONEME, Segment, Timeline
 
     dur = len(pcm) / 16000
     runs = offline_phones(pcm)
@@ -244,9 +244,9 @@ def _audio_shapes(ctx: Context, rows: List[dict]) -> None:
     """Mouth shapes against the transcript-aligned track: live at each look-ahead and offline
     without a transcript (frames showing the same shape, toon bank, its timing)."""
     from .._data import default_bank_dir
-    from ..animator import Animator
-    from ..bank import Bank
-    from ..live.offline import live_specs
+    from ..pipeline.animator import Animator
+    from ..banks.bank import Bank
+    from ..pipeline.liveclip import live_specs
 
     bank = Bank.load(default_bank_dir())
     recs = _recordings(ctx, 6 if ctx.quick else 30)
@@ -288,10 +288,10 @@ def _audio_lips(ctx: Context, rows: List[dict]) -> None:
     visemes/grid-s1 bank (its own timing): live (140 and 200 ms) against offline without a
     transcript, and the transcript-aligned track for reference. r per clip, mean."""
     from .._data import default_bank_dir
-    from ..animator import Animator
-    from ..bank import Bank
-    from ..coarticulation import predicted
-    from ..live.offline import live_specs
+    from ..pipeline.animator import Animator
+    from ..banks.bank import Bank
+    from ..motion.coarticulation import predicted
+    from ..pipeline.liveclip import live_specs
     from ..speech.audio import load_audio
     from . import grid as G
     from .coarticulation import bank_values
@@ -353,7 +353,7 @@ def _audio_speed(ctx: Context, rows: List[dict]) -> None:
     import cv2
 
     from .._data import default_bank_dir
-    from ..bank import Bank
+    from ..banks.bank import Bank
     from ..live import AUDIO_LOOKAHEAD_S, LiveAnimator
     from ..speech.audio import load_audio
 
@@ -402,7 +402,7 @@ def _audio_sessions(ctx: Context, rows: List[dict]) -> None:
     import cv2
 
     from .._data import default_bank_dir
-    from ..bank import Bank
+    from ..banks.bank import Bank
     from ..live import AUDIO_LOOKAHEAD_S, LiveAnimator, RendererPool
     from ..speech.audio import load_audio
     from . import grid as G
@@ -484,7 +484,7 @@ def _events_delay(ctx: Context, rows: List[dict]) -> None:
     longest event. Measured with the live animator's own is_final (frames whose data never
     reaches the look-ahead past them, the last ones, left out)."""
     from .._data import default_bank_dir
-    from ..bank import Bank
+    from ..banks.bank import Bank
     from ..live import LiveAnimator
 
     bank = Bank.load(default_bank_dir())

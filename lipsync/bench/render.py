@@ -1,7 +1,7 @@
 """Speed figures of the renderer (registered in :data:`lipsync.bench.FIGURES`):
 
 1. one Beier-Neely field (30 random lines) at 512x512 and 1280x720: ms and peak extra
-   memory of :func:`lipsync.warp.beier_neely_map` against a naive full-broadcast numpy
+   memory of :func:`lipsync.morphing.warp.beier_neely_map` against a naive full-broadcast numpy
    version of the same formulas; the speed-up from symmetric halving;
 2. ms per frame of each render method on the default subject at 512x512 and scaled to
    1280x720; beier-neely / flow; flow against a plain memory copy of the bytes a flow
@@ -74,9 +74,9 @@ def _random_symmetric_lines(shape, n, rng):
 
 
 def bench_field(rows: List[dict], quick: bool) -> None:
-    from ..bank import WarpParams
-    from ..flows import flow_field
-    from ..warp import beier_neely_displacement, beier_neely_map
+    from ..banks.bank import WarpParams
+    from ..morphing.flows import flow_field
+    from ..morphing.warp import beier_neely_displacement, beier_neely_map
 
     rng = np.random.default_rng(0)
     for shape in ((512, 512), (720, 1280)):
@@ -223,10 +223,10 @@ def face_bank(folder: Path, size) -> Path:
 
 
 def bench_methods(rows: List[dict], banks: Dict[str, Path], quick: bool) -> None:
-    from ..bank import Bank
-    from ..preprocess import preprocess
-    from ..render import METHODS, Renderer
-    from ..store import FlowStore
+    from ..banks.bank import Bank
+    from ..morphing.preprocess import preprocess
+    from ..morphing.render import METHODS, Renderer
+    from ..morphing.store import FlowStore
 
     pairs = [("X", "D"), ("A", "C"), ("B", "F"), ("E", "H")]
     for label, path in banks.items():
@@ -306,9 +306,9 @@ def _own_and_children_cpu() -> float:
 
 
 def bench_store(rows: List[dict], banks: Dict[str, Path]) -> None:
-    from ..bank import Bank
-    from ..preprocess import all_pairs
-    from ..store import FlowStore
+    from ..banks.bank import Bank
+    from ..morphing.preprocess import all_pairs
+    from ..morphing.store import FlowStore
 
     for label, path in banks.items():
         bank = Bank.load(path)
@@ -365,9 +365,9 @@ def _face_banks(ctx: Context) -> Dict[str, Path]:
 
 
 def _preprocessed(path: Path):
-    from ..bank import Bank
-    from ..preprocess import preprocess
-    from ..store import FlowStore
+    from ..banks.bank import Bank
+    from ..morphing.preprocess import preprocess
+    from ..morphing.store import FlowStore
 
     bank = Bank.load(path)
     store = FlowStore.for_bank(bank)
@@ -380,7 +380,7 @@ def bench_whole_frame(rows: List[dict], banks: Dict[str, Path], quick: bool) -> 
     """Flow frame vs classic Beier-Neely frame vs memory copy, one core, whole-frame motion."""
     import cv2
 
-    from ..render import Renderer, available_kernels
+    from ..morphing.render import Renderer, available_kernels
 
     threads = cv2.getNumThreads()
     cv2.setNumThreads(1)  # one core: the classic warp's cv2.remap would otherwise use both
@@ -471,7 +471,7 @@ def bench_whole_frame(rows: List[dict], banks: Dict[str, Path], quick: bool) -> 
 
 def bench_presets(rows: List[dict], banks: Dict[str, Path], timeline: Path, audio: Path, quick: bool) -> None:
     """x264 presets for ``lipsync render``: wall time and file size, same clip, flows cached."""
-    from ..clip import render_clip
+    from ..pipeline.clip import render_clip
 
     for label, path in banks.items():
         _preprocessed(path)

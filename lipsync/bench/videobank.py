@@ -105,7 +105,7 @@ def judge_clip(bank, clip: str, mesh=None, *, timing=None, methods=METHODS) -> D
         Method → ``{"open": lip opening per frame, "psnr": ..., "ssim": ...}``; also
         ``"real"`` → ``{"open": ...}`` and ``"specs"``, the sequencer's frames.
     """
-    from ..animator import Animator
+    from ..pipeline.animator import Animator
     from ..face import measure as M
     from ..face.compare import mouth_box, psnr, register, ssim
     from ..face.landmarks import FaceMesh
@@ -170,7 +170,7 @@ def median_openings(names: List[str], pmap_name: str = "english-to-rhubarb") -> 
     """Each viseme's median real lip opening over its candidate frames in the clips ``names``
     (the "ideal pictures": what a bank would show if every picture had the typical opening)."""
     from ..face import measure as M
-    from ..phonemes import load_map
+    from ..phonetics.phonemes import load_map
     from ..speech.align import align
     from ..videobank.select import candidates
     from ..videobank.speech import viseme_spans
@@ -190,7 +190,7 @@ def median_openings(names: List[str], pmap_name: str = "english-to-rhubarb") -> 
 
 @FIGURES.decorator("videobank")
 def videobank_figures(ctx: Context, rows: List[dict]) -> None:
-    from ..bank import Bank
+    from ..banks.bank import Bank
     from ..face.landmarks import FaceMesh
 
     names = [c for c in grid.BANK_CLIPS if grid.video(c).is_file()]
@@ -291,10 +291,10 @@ def range_figures(ctx: Context, rows: List[dict]) -> None:
     sharpness (variance of the Laplacian) against the real frames', the pops figure (99th
     percentile of the mean grey change above the nose between consecutive frames), and the
     bank pictures' mean difference above the nose."""
-    from ..bank import Bank
+    from ..banks.bank import Bank
     from ..face.landmarks import FaceMesh
     from ..face.compare import mouth_box
-    from ..phonemes import load_map
+    from ..phonetics.phonemes import load_map
     from ..videobank import make_bank
     from ..videobank.select import sharpness
 

@@ -16,10 +16,10 @@ import argparse
 import os
 from typing import Iterable, Optional, Tuple
 
-from ..phonemes import DEFAULT_MAP, MAPS, PhonemeMap, bank_viseme_timeline, load_map
+from ..phonetics.phonemes import DEFAULT_MAP, MAPS, PhonemeMap, bank_viseme_timeline, load_map
 from ..readers import READERS, read_timeline
-from ..timeline import Timeline
-from ..timing import DEFAULT_CURVE, timing_names
+from ..motion.timeline import Timeline
+from ..motion.timing import DEFAULT_CURVE, timing_names
 
 DEFAULT_MOHO_FPS = 24.0
 
@@ -160,7 +160,7 @@ def load_viseme_timeline(args: argparse.Namespace, *, rest: Optional[str] = None
     -------
     (Timeline, PhonemeMap)
         The viseme timeline in the bank's viseme names, and the map renamed to them (its
-        ``closures`` are what :func:`lipsync.sequencer.sequence` wants).
+        ``closures`` are what :func:`lipsync.motion.sequencer.sequence` wants).
 
     Examples
     --------

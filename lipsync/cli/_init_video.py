@@ -14,7 +14,7 @@ _PHOTO_ONLY = {"template": "toon", "names": [], "face_box": None, "layout": "aut
 
 def add_video_options(p: argparse.ArgumentParser) -> None:
     """Add --video, --text, --lang, --map, --size and --quiet to the ``init`` parser."""
-    from ..phonemes import DEFAULT_MAP, MAPS
+    from ..phonetics.phonemes import DEFAULT_MAP, MAPS
     from ._common import add_jobs_option, add_lang_option, add_quiet_option
     from ..videobank.config import DEFAULT_MAX_SIDE
 

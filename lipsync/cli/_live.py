@@ -1,5 +1,5 @@
 """``--live`` and ``--lookahead MS``, shared by ``lipsync render`` and ``lipsync cues``
-(what a live session fed the audio shows: :mod:`lipsync.live.offline`)."""
+(what a live session fed the audio shows: :mod:`lipsync.pipeline.liveclip`)."""
 
 from __future__ import annotations
 

@@ -18,7 +18,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from ..render import METHODS
+from ..morphing.render import METHODS
 from ._common import add_jobs_option, add_quiet_option, add_store_option, add_timeline_options
 
 
@@ -84,11 +84,11 @@ def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from ..atlas.build import build_atlas, pairs_in_plan, pairs_in_specs, write_atlas
-    from ..bank import Bank
-    from ..coarticulation import resolve_timing, viseme_classes
+    from ..banks.bank import Bank
+    from ..motion.coarticulation import resolve_timing, viseme_classes
     from ..errors import InputError
-    from ..sequencer import FPS_RANGE, plan_segments, sequence
-    from ..timing import is_model
+    from ..motion.sequencer import FPS_RANGE, plan_segments, sequence
+    from ..motion.timing import is_model
     from ._common import check_png, load_viseme_timeline
 
     check_png(args.output)

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import argparse
 
-from ..bank import Bank
-from ..store import FlowStore
+from ..banks.bank import Bank
+from ..morphing.store import FlowStore
 from ._common import add_store_option
 
 
@@ -17,8 +17,8 @@ def add_parser(sub) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..normalise import bank_axis, symmetric_lines
-    from ..preprocess import all_pairs
+    from ..morphing.normalise import bank_axis, symmetric_lines
+    from ..morphing.preprocess import all_pairs
 
     bank = Bank.load(args.bank)
     h, w = bank.shape

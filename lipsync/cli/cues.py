@@ -1,6 +1,6 @@
 """``lipsync cues INPUT -o OUT``: the viseme track the video would show, as mouth cues.
 
-The track is the sequencer's cleaned segment plan (:func:`lipsync.sequencer.plan_segments`,
+The track is the sequencer's cleaned segment plan (:func:`lipsync.motion.sequencer.plan_segments`,
 what ``lipsync timeline`` prints: gaps to rest, merges, short pauses held, flickers dropped)
 of the input mapped with the same map as ``render``. It is written in a format other tools
 read (:data:`lipsync.writers.WRITERS`): Rhubarb's TSV, JSON and XML, Moho switch data at
@@ -19,7 +19,7 @@ import os
 import sys
 from typing import Dict
 
-from ..frames import DEFAULT_FPS as DEFAULT_RENDER_FPS
+from ..motion.frames import DEFAULT_FPS as DEFAULT_RENDER_FPS
 from ..writers import DEFAULT_FPS, DEFAULT_TIER, WRITERS
 from ._common import add_bank_option, add_quiet_option, add_shapes_option, add_timeline_options, shaped_timeline
 from ._live import add_live_options, lookahead_seconds as _lookahead
@@ -60,8 +60,8 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
 def run(args: argparse.Namespace) -> int:
     """Write the cue file; returns the exit code."""
     from ..errors import InputError
-    from ..phonemes import DEFAULT_MAP, load_map
-    from ..sequencer import FPS_RANGE, plan_segments
+    from ..phonetics.phonemes import DEFAULT_MAP, load_map
+    from ..motion.sequencer import FPS_RANGE, plan_segments
     from ..writers import format_for, write_cues
 
     name = args.format or format_for(args.output)  # a bad name fails before any reading
@@ -122,9 +122,9 @@ def _atlas_frames(args: argparse.Namespace, fps: float) -> int:
     """frames.json: the timeline in the atlas' viseme names, sequenced as ``render`` does,
     each frame the nearest cell of the atlas."""
     from ..atlas.schema import load_atlas
-    from ..coarticulation import resolve_timing, viseme_classes
+    from ..motion.coarticulation import resolve_timing, viseme_classes
     from ..errors import InputError
-    from ..sequencer import plan_segments
+    from ..motion.sequencer import plan_segments
     from ..writers import write_cues
 
     if args.atlas is None:
@@ -132,7 +132,7 @@ def _atlas_frames(args: argparse.Namespace, fps: float) -> int:
     atlas = load_atlas(args.atlas)
     bank = None
     if args.bank is not None:
-        from ..bank import Bank
+        from ..banks.bank import Bank
 
         bank = Bank.load(args.bank)
         if tuple(bank.names) != atlas.visemes or bank.rest != atlas.rest:
@@ -147,7 +147,7 @@ def _atlas_frames(args: argparse.Namespace, fps: float) -> int:
                duration=timeline.duration, timing=timing, timeline=timeline,
                classes=viseme_classes(pmap, atlas.rest), atlas=atlas)
     if not args.quiet:
-        from ..sequencer import frame_count
+        from ..motion.sequencer import frame_count
 
         print(f"lipsync: wrote {frame_count(timeline.duration, fps)} frames of {atlas.path} at {fps:g} fps "
               f"to {args.output}", file=sys.stderr)
@@ -156,8 +156,8 @@ def _atlas_frames(args: argparse.Namespace, fps: float) -> int:
 
 def _bank_track(args: argparse.Namespace, base):
     """The track in the bank's names (checked against it), bank name -> map name, the bank's rest."""
-    from ..bank import Bank
-    from ..phonemes import resolve_visemes
+    from ..banks.bank import Bank
+    from ..phonetics.phonemes import resolve_visemes
 
     bank = Bank.load(args.bank)
     timeline, pmap = shaped_timeline(args, rest=bank.rest, viseme_names=bank.names)
@@ -168,10 +168,10 @@ def _bank_track(args: argparse.Namespace, base):
 def _live_cues(args: argparse.Namespace, name: str, fps: float) -> int:
     """``--live``: the mouth shapes a live session fed the audio in real time shows, frame by frame."""
     from .._data import default_bank_dir
-    from ..bank import Bank
+    from ..banks.bank import Bank
     from ..errors import InputError
-    from ..live.offline import live_cues, live_specs
-    from ..phonemes import DEFAULT_MAP, load_map, resolve_visemes
+    from ..pipeline.liveclip import live_cues, live_specs
+    from ..phonetics.phonemes import DEFAULT_MAP, load_map, resolve_visemes
 
     if WRITERS.get(name).name == "atlas" or args.atlas is not None:
         raise InputError("--live writes mouth cues; --format atlas is for timelines")

@@ -5,13 +5,13 @@ from __future__ import annotations
 import argparse
 import sys
 
-from ..clip import DEFAULT_CRF, DEFAULT_PRESET
+from ..pipeline.clip import DEFAULT_CRF, DEFAULT_PRESET
 from ._common import TIMING_HELP, add_jobs_option, add_quiet_option, add_store_option
 
 
 def add_parser(sub) -> None:
-    from ..phonemes import DEFAULT_MAP
-    from ..timing import timing_names
+    from ..phonetics.phonemes import DEFAULT_MAP
+    from ..motion.timing import timing_names
 
     p = sub.add_parser("dub", help="re-voice a video: its own frames, the lower face driven by new speech",
                        description="Keep VIDEO's frames (head motion, blinks, background) and replace the "
@@ -50,7 +50,7 @@ def add_parser(sub) -> None:
 def run(args: argparse.Namespace) -> int:
     import os
 
-    from ..dubbing import dub
+    from ..pipeline.dubbing import dub
     from ..encode.mp4 import check_preset
 
     check_preset(args.preset)  # before loading anything

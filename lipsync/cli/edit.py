@@ -19,7 +19,7 @@ def add_parser(sub) -> None:
 def run(args: argparse.Namespace) -> int:
     from ..editor import Editor, make_app
     from ..errors import InputError
-    from ..store import FlowStore
+    from ..morphing.store import FlowStore
     from ..web import Session, run as serve
 
     if not 0 <= args.port <= 65535:

@@ -7,7 +7,7 @@ from pathlib import Path
 
 
 def add_parser(sub) -> None:
-    from ..banks.init import LAYOUTS, LINE_SOURCES, SPRITE_MAX_SIDE, TEMPLATES
+    from ..videobank.photos import LAYOUTS, LINE_SOURCES, SPRITE_MAX_SIDE, TEMPLATES
 
     p = sub.add_parser("init", help="write a starting bank.yaml for a folder of viseme images")
     p.add_argument("folder", metavar="DIR", help="folder with one image per viseme (PNG/JPEG)")
@@ -74,7 +74,7 @@ def run(args: argparse.Namespace) -> int:
         from ._init_video import run_video
 
         return run_video(args)
-    from ..banks.init import init_bank, parse_face_box
+    from ..videobank.photos import init_bank, parse_face_box
     from ..banks.names import parse_names_option
     from ..composite import parse_at
     from ..errors import InputError

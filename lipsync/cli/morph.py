@@ -6,7 +6,7 @@ import argparse
 
 import numpy as np
 
-from ..render import METHODS
+from ..morphing.render import METHODS
 from ._common import add_store_option, check_png
 
 #: Width of one tile in strips and sheets: large enough to judge lip contours, small
@@ -32,11 +32,11 @@ def add_parser(sub) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..bank import Bank
+    from ..banks.bank import Bank
     from ..errors import InputError
-    from ..preview import save_png, strip
-    from ..render import Renderer
-    from ..store import FlowStore
+    from ..encode.preview import save_png, strip
+    from ..morphing.render import Renderer
+    from ..morphing.store import FlowStore
 
     check_png(args.output)
     bank = Bank.load(args.bank)

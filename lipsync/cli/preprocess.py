@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import argparse
 
-from ..bank import Bank
-from ..store import FlowStore
+from ..banks.bank import Bank
+from ..morphing.store import FlowStore
 from ._common import add_jobs_option, add_quiet_option, add_store_option
 
 
@@ -25,7 +25,7 @@ def add_parser(sub) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from ..errors import InputError
-    from ..preprocess import preprocess
+    from ..morphing.preprocess import preprocess
 
     if args.jobs is not None and args.jobs < 1:
         raise InputError(f"--jobs must be at least 1, got {args.jobs}")

@@ -20,9 +20,9 @@ def add_parser(sub) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..bank import Bank
-    from ..normalise import normalise
-    from ..preview import feature_lines, preview_sheet, save_png
+    from ..banks.bank import Bank
+    from ..morphing.normalise import normalise
+    from ..encode.preview import feature_lines, preview_sheet, save_png
 
     check_png(args.output)
     bank = Bank.load(args.bank)

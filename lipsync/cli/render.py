@@ -5,9 +5,9 @@ from __future__ import annotations
 import argparse
 import sys
 
-from ..clip import DEFAULT_CRF, DEFAULT_FPS, DEFAULT_PRESET
+from ..pipeline.clip import DEFAULT_CRF, DEFAULT_FPS, DEFAULT_PRESET
 from ..encode import ENCODERS
-from ..render import METHODS
+from ..morphing.render import METHODS
 from ._common import (add_bank_option, add_jobs_option, add_quiet_option, add_shapes_option, add_store_option,
                       add_timeline_options)
 from ._live import add_live_options, lookahead_seconds
@@ -61,8 +61,8 @@ def add_parser(sub) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from .._data import default_bank_dir
-    from ..bank import Bank
-    from ..clip import composite_from_options, load_background, render_clip
+    from ..banks.bank import Bank
+    from ..pipeline.clip import composite_from_options, load_background, render_clip
     from ..errors import InputError
 
     from ..encode.mp4 import check_preset

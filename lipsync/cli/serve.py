@@ -5,14 +5,14 @@ from __future__ import annotations
 import argparse
 import sys
 
-from ..render import METHODS
-from ..timing import timing_names
+from ..morphing.render import METHODS
+from ..motion.timing import timing_names
 from ._common import TIMING_HELP, add_bank_option, add_quiet_option, add_store_option
 
 
 def add_parser(sub) -> None:
     from ..server import (DEFAULT_IDLE_TIMEOUT_S, DEFAULT_MAX_SESSIONS, DEFAULT_MAX_UPLOAD, DEFAULT_QUALITY)
-    from ..frames import DEFAULT_FPS
+    from ..motion.frames import DEFAULT_FPS
     from ..server.protocol import FPS_CHOICES
     from ..server.jobs import DEFAULT_JOB_TIMEOUT_S, DEFAULT_MAX_CLIP_S
 

@@ -11,8 +11,8 @@ from __future__ import annotations
 import argparse
 import sys
 
-from ..frames import DEFAULT_FPS
-from ..sequencer import FPS_RANGE, describe, plan_segments, sequence
+from ..motion.frames import DEFAULT_FPS
+from ..motion.sequencer import FPS_RANGE, describe, plan_segments, sequence
 from ._common import add_timeline_options, load_viseme_timeline
 
 
@@ -35,9 +35,9 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
 
 def run(args: argparse.Namespace) -> int:
     """Print the viseme track (and the frame schedule); returns the exit code."""
-    from ..coarticulation import viseme_classes
-    from ..sequencer import check_fps
-    from ..timing import DEFAULT_CURVE
+    from ..motion.coarticulation import viseme_classes
+    from ..motion.sequencer import check_fps
+    from ..motion.timing import DEFAULT_CURVE
 
     fps = check_fps(args.fps)
     timeline, pmap = load_viseme_timeline(args)

@@ -6,7 +6,7 @@
   plate picture (the lower-face mask, the pose and colour match, the blend).
 * :mod:`lipsync.composite.plate` -- the morphed lower face onto frames of real video, per
   frame and ROI-only: a bank's idle plate (``lipsync render``) and the video being re-voiced
-  (``lipsync dub``, :mod:`lipsync.dubbing`).
+  (``lipsync dub``, :mod:`lipsync.pipeline.dubbing`).
 
 The names below are the ones ``lipsync.composite`` has always had.
 """

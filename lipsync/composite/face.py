@@ -146,7 +146,7 @@ def polygon_from_mesh(points: np.ndarray, *, grow: float = 0.0) -> np.ndarray:
 
 def polygon_from_lines(lines: Mapping[str, object], *, grow: float = 0.0) -> np.ndarray:
     """:func:`lower_face_polygon` of a bank viseme's face lines (``jaw_l``, ``jaw_r``,
-    ``nose_base_l``, ``nose_base_r``: :class:`~lipsync.bank.Feature` or ``(N, 2)`` arrays)."""
+    ``nose_base_l``, ``nose_base_r``: :class:`~lipsync.banks.bank.Feature` or ``(N, 2)`` arrays)."""
     def pts(name):
         f = lines[name]
         return np.asarray(getattr(f, "points", f), np.float64)

@@ -146,9 +146,9 @@ class PlateCompositor:
         x0, y0, x1, y1 = self.box
         self.mask = mask
         self._mask_box = np.ascontiguousarray(mask[y0:y1, x0:x1])
-        from ..store import Crop
+        from ..morphing.store import Crop
 
-        #: The same box as a :class:`lipsync.store.Crop`: all a renderer need make of a frame.
+        #: The same box as a :class:`lipsync.morphing.store.Crop`: all a renderer need make of a frame.
         self.region = Crop(y0, y1, x0, x1)
         self.lut = lut
         self._local = threading.local()
@@ -315,7 +315,7 @@ class Plate:
     def __init__(self, frames: np.ndarray, poses: np.ndarray, fps: float, compositor: PlateCompositor):
         self.frames, self.poses, self.fps, self.compositor = frames, poses, float(fps), compositor
         self._prepared = None if compositor is None else [compositor.prepare(p, frames.shape[1:]) for p in poses]
-        #: The box of the morphed frame the compositor reads (a :class:`lipsync.store.Crop`).
+        #: The box of the morphed frame the compositor reads (a :class:`lipsync.morphing.store.Crop`).
         self.region = None if compositor is None else compositor.region
 
     def __len__(self) -> int:

@@ -17,7 +17,7 @@ The stage between the renderer and the encoder::
 Per frame only the mouth's rectangle is touched: every output buffer starts as the
 precomputed canvas (the body, already flattened when the output is opaque,
 :attr:`Compositor.initial`), and :meth:`Compositor.apply` rewrites the rectangle with the
-mouth over the canvas's pixels there (premultiplied "over", :mod:`lipsync.alpha`).
+mouth over the canvas's pixels there (premultiplied "over", :mod:`lipsync.morphing.alpha`).
 
 Examples
 --------
@@ -39,9 +39,9 @@ from typing import Optional, Tuple, Union
 import cv2
 import numpy as np
 
-from ..alpha import flatten, has_alpha, over, resize_rgba
+from ..morphing.alpha import flatten, has_alpha, over, resize_rgba
 # defined beside bank.yaml's composite: key (the bank room sits below this one)
-from ..bank import MAX_SCALE, Composite, check_placement
+from ..banks.bank import MAX_SCALE, Composite, check_placement
 from ..errors import InputError
 
 __all__ = ["Composite", "Compositor", "DEFAULT_BACKGROUND", "MAX_SCALE", "parse_at", "check_placement"]

@@ -90,7 +90,7 @@ def editor_page(bank_dir, driver, *, store=None):
 
     Yields ``(editor, session)`` once the page has loaded the bank and shown a preview.
     """
-    from ..store import FlowStore
+    from ..morphing.store import FlowStore
     from ..web import Session, start_in_thread
     from .server import Editor, make_app
 
@@ -111,7 +111,7 @@ def editor_page(bank_dir, driver, *, store=None):
 def screenshot(bank_dir, out, *, viseme: str = "D", alpha: float = 0.5, select: str = "upper_outer_l") -> None:
     """A PNG of the editor on a copy of ``bank_dir``: ``viseme`` shown, the rest→viseme
     preview at ``alpha`` rendered with flows, one line selected."""
-    from ..preview import save_png
+    from ..encode.preview import save_png
 
     tmp = Path(tempfile.mkdtemp(prefix="lipsync-shot-"))
     try:

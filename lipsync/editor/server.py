@@ -8,12 +8,12 @@ API (every ``/api/`` call needs the session token, see :mod:`lipsync.web`):
 ``GET /api/image/{name}``
     An image file of the bank folder (PNG/JPEG only; nothing outside the folder).
 ``POST /api/draft`` with ``{doc}``
-    Validates the edited document with the real loader (:meth:`lipsync.bank.Bank.from_text`);
+    Validates the edited document with the real loader (:meth:`lipsync.banks.bank.Bank.from_text`);
     valid → it becomes the draft the preview shows and its missing flows are queued for the
     background worker: ``{ok: true, version}``; invalid → 422 ``{ok: false, error}`` where
     ``error`` has ``message``, ``viseme``, ``feature``, ``line``.
 ``GET /api/preview?from=A&to=D&alpha=0.5``
-    PNG of the draft's in-between frame from :class:`lipsync.render.Renderer`: the ``flow``
+    PNG of the draft's in-between frame from :class:`lipsync.morphing.render.Renderer`: the ``flow``
     method when the pair's flows for the draft are in the store, ``beier-neely`` (exact, no
     flows needed) meanwhile. Headers ``X-Lipsync-Method``, ``X-Lipsync-Version``.
 ``GET /api/status``
@@ -41,13 +41,13 @@ import numpy as np
 import yaml
 
 from .. import _yaml
-from ..bank import Bank
+from ..banks.bank import Bank
 from ..banks.yamlio import dump_bank, header_comments, write_bank_text
 from ..errors import BankError, InputError
-from ..normalise import normalise
-from ..preprocess import all_pairs
-from ..render import Renderer
-from ..store import FlowStore
+from ..morphing.normalise import normalise
+from ..morphing.preprocess import all_pairs
+from ..morphing.render import Renderer
+from ..morphing.store import FlowStore
 from ..web import Guard, PathRefused, Session, resolve_inside
 
 STATIC = Path(__file__).resolve().parent / "static"
@@ -198,7 +198,7 @@ class FlowWorker:
         return True
 
     def _run(self) -> None:
-        from ..preprocess import bank_pair_flows
+        from ..morphing.preprocess import bank_pair_flows
 
         while True:
             with self._cond:
@@ -320,7 +320,7 @@ class Editor:
         came from, and the mirror axis the new lines are normalised about (None without
         symmetry). InputError when no image shows a face or the request does not fit the bank.
         """
-        from ..banks.init import place_face_lines
+        from ..videobank.photos import place_face_lines
         from ..face.landmarks import FaceMesh
         from ..face.lines import FACE_WARP
 
@@ -377,7 +377,7 @@ class ConflictError(InputError):
 
 def normalise_axis(bank: Bank) -> Optional[float]:
     """The mirror axis the flows of ``bank`` are keyed with (None without symmetry)."""
-    from ..normalise import bank_axis
+    from ..morphing.normalise import bank_axis
 
     return bank_axis(bank) if bank.symmetry else None
 

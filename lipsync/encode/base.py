@@ -111,7 +111,7 @@ class Writer:
         Expected frame count, for the progress bar only.
     channels : {3, 4}
         RGB frames, or RGBA with straight alpha (only writers whose :attr:`alpha` is True:
-        an opaque format needs the frames flattened first, see :func:`lipsync.alpha.flatten`).
+        an opaque format needs the frames flattened first, see :func:`lipsync.morphing.alpha.flatten`).
 
     Examples
     --------
@@ -140,7 +140,7 @@ class Writer:
             raise ValueError(f"channels must be 3 (RGB) or 4 (RGBA), got {channels!r}")
         if channels == 4 and not self.alpha:
             raise ValueError(f"{self.out}: {type(self).__name__} stores no alpha; flatten RGBA frames onto a "
-                             f"background first (lipsync.alpha.flatten) or write a format with alpha "
+                             f"background first (lipsync.morphing.alpha.flatten) or write a format with alpha "
                              f"({', '.join(n for n, c in ENCODERS.items() if c.alpha)})")
         self.channels = channels
         if not (isinstance(fps, (int, float, Fraction)) and float(fps) > 0 and np.isfinite(float(fps))):

@@ -9,7 +9,7 @@
 Audio with a :class:`PipeWriter`: the video length is authoritative (``n_frames / fps``).
 The audio starts at the first frame (t = 0), is padded with silence when short (``apad``)
 and cut at the video's duration (``-t``) when long. When the caller announces the frame
-count (``frames=N``, as :func:`lipsync.clip.render_clip` does) one ffmpeg process encodes
+count (``frames=N``, as :func:`lipsync.pipeline.clip.render_clip` does) one ffmpeg process encodes
 the video and the audio together; writing any other number of frames is then an error.
 Otherwise the count is only known at the end: the video is encoded first, then muxed with
 the audio in a second (cheap, stream-copy) pass rather than with ``-shortest``.
@@ -321,7 +321,7 @@ class RgbPipeWriter(PipeWriter):
 
 def to_yuv(pix_fmt: str) -> List[str]:
     """ffmpeg arguments converting RGB(A) input to ``pix_fmt`` with the BT.709 matrix, tv range,
-    and tagging the stream so (as :mod:`lipsync.yuv` does for mp4: swscale's own default
+    and tagging the stream so (as :mod:`lipsync.encode.yuv` does for mp4: swscale's own default
     would be BT.601, shifting colours in every player that reads the tags).
 
     Examples

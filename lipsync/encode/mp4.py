@@ -1,7 +1,7 @@
 """H.264 in an mp4 (or .m4v/.mkv, or with ``--format mp4`` a .mov) container: the default output.
 
 The ffmpeg binary bundled with imageio-ffmpeg reads raw ``yuv420p`` frames on stdin,
-converted from RGB in this process (:mod:`lipsync.yuv`, BT.709 limited range): H.264
+converted from RGB in this process (:mod:`lipsync.encode.yuv`, BT.709 limited range): H.264
 (libx264), tagged BT.709 matrix, primaries and transfer and tv range (the matrix web players
 assume for untagged RGB-sourced video), ``-movflags +faststart``, ``-crf`` and ``-preset``
 (x264's presets, or a name from :data:`X264_PRESETS`). yuv420p needs even dimensions: an odd
@@ -114,14 +114,14 @@ class Mp4Writer(PipeWriter):
         return CONTAINERS.get(ext, ("mp4", True))
 
     def _input_args(self) -> List[str]:
-        from ..yuv import rgb_to_yuv420p
+        from .yuv import rgb_to_yuv420p
 
         width, height = self.size
         self._pad = (width % 2, height % 2)
         pw, ph = width + self._pad[0], height + self._pad[1]
         self._to_yuv = rgb_to_yuv420p
         self._payload_bytes = pw * ph + 2 * (pw // 2) * (ph // 2)
-        # Frames arrive already converted (lipsync.yuv, on the writing thread): see
+        # Frames arrive already converted (lipsync.encode.yuv, on the writing thread): see
         # prepare(). Tagged on input too, so ffmpeg sees nothing to convert.
         return ["-f", "rawvideo", "-pix_fmt", "yuv420p", "-color_range", "tv", "-colorspace", "bt709",
                 "-color_primaries", "bt709", "-color_trc", "bt709", "-s", f"{pw}x{ph}"]

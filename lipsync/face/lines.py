@@ -35,7 +35,7 @@ from typing import Dict, List, Mapping, Optional, Sequence, Tuple
 
 import numpy as np
 
-from ..bank import Feature, WarpParams
+from ..banks.bank import Feature, WarpParams
 from . import topology as T
 
 #: Beier–Neely weights for banks of face lines: the method's standard b = 2. With the
@@ -190,7 +190,7 @@ def face_features(points: Mapping[str, np.ndarray], shape: Tuple[int, int], *,
     Returns
     -------
     dict
-        Viseme → {feature name → :class:`~lipsync.bank.Feature`}: the same names, kinds and
+        Viseme → {feature name → :class:`~lipsync.banks.bank.Feature`}: the same names, kinds and
         segment counts for every viseme (anchors are cut at the picture's border; one
         mostly outside any viseme's picture is left out of all of them, with its mirror
         partner), ready for bank.yaml.

@@ -2,9 +2,9 @@
 
 Events (phonemes, visemes or words with start and end times, or whole timelines) are
 mapped to the bank's visemes by the same functions as the offline :class:`lipsync.Animator`
-(:func:`lipsync.phonemes.bank_viseme_timeline`), sequenced causally by
+(:func:`lipsync.phonetics.phonemes.bank_viseme_timeline`), sequenced causally by
 :class:`lipsync.live.causal.CausalSequencer` (the sequencer's own rules on a window of the
-track) and rendered by :class:`lipsync.render.Renderer`.
+track) and rendered by :class:`lipsync.morphing.render.Renderer`.
 
 Examples
 --------
@@ -26,14 +26,14 @@ from typing import List, Optional, Tuple, Union
 
 import numpy as np
 
-from ..bank import Bank
-from ..coarticulation import resolve_timing, viseme_classes
+from ..banks.bank import Bank
+from ..motion.coarticulation import resolve_timing, viseme_classes
 from ..errors import InputError, TimelineError
-from ..phonemes import DEFAULT_MAP, PhonemeMap, bank_viseme_timeline, check_map_against, load_map
-from ..frames import DEFAULT_FPS
-from ..sequencer import FrameSpec
-from ..store import FlowStore
-from ..timeline import MAX_TIMELINE_S, PHONEME, VISEME, Segment, Timeline
+from ..phonetics.phonemes import DEFAULT_MAP, PhonemeMap, bank_viseme_timeline, check_map_against, load_map
+from ..motion.frames import DEFAULT_FPS
+from ..motion.sequencer import FrameSpec
+from ..morphing.store import FlowStore
+from ..motion.timeline import MAX_TIMELINE_S, PHONEME, VISEME, Segment, Timeline
 from .causal import LOOKAHEAD_S, CausalSequencer
 from .pool import RendererPool
 
@@ -99,7 +99,7 @@ class LiveAnimator:
         Seconds of pushed data past a frame's time after which the frame counts as final
         (:attr:`final_until`, :meth:`is_final`); default: the bound the timing implies,
         :data:`LOOKAHEAD_S` (0.38 s) for the sequencer's rules,
-        :func:`lipsync.coarticulation.lookahead` (0.38 s with the default constants and a map with
+        :func:`lipsync.motion.coarticulation.lookahead` (0.38 s with the default constants and a map with
         a breath viseme, 0.194 s without one) for
         the dominance model. It does not change which frame is shown.
     store : FlowStore, optional
@@ -153,7 +153,7 @@ class LiveAnimator:
         if prepare is None:
             prepare = self.renderer.method in ("flow", "splat")
         if prepare:
-            from ..preprocess import preprocess
+            from ..morphing.preprocess import preprocess
 
             preprocess(self.bank, store=self.renderer.store, quiet=True, normalised=self.renderer.nb)
         self._state = threading.Lock()   # the track and its plan (the pool guards the renderers)
@@ -181,7 +181,7 @@ class LiveAnimator:
     # ------------------------------------------------------------------ input
     def push(self, start, end: Optional[float] = None, label: Optional[str] = None, *,
              kind: Optional[str] = None, offset: float = 0.0) -> None:
-        """Add one event, or a whole :class:`~lipsync.timeline.Timeline`.
+        """Add one event, or a whole :class:`~lipsync.motion.timeline.Timeline`.
 
         Parameters
         ----------
@@ -349,7 +349,7 @@ class LiveAnimator:
         """The frame number shown at time ``t`` (the frame whose interval holds ``t``; >= 0).
 
         Any number is a time: before 0 is frame 0, and a time past everything that can be
-        pushed (:data:`~lipsync.timeline.MAX_TIMELINE_S`, infinity included) is a frame of
+        pushed (:data:`~lipsync.motion.timeline.MAX_TIMELINE_S`, infinity included) is a frame of
         rest. NaN is refused (InputError): a broken clock, not a time.
         """
         t = float(t)

@@ -2,9 +2,9 @@
 
 :class:`CausalSequencer` takes viseme segments in time order (``extend``) and answers
 "which FrameSpec does frame n show" (``spec``) from what it has been given so far. It does
-not have rules of its own: it calls :func:`lipsync.sequencer.plan_segments`,
-:func:`~lipsync.sequencer.plan_transitions` and :func:`~lipsync.sequencer.frame_specs`,
-the same functions :func:`~lipsync.sequencer.sequence` is made of, on a *window* of the
+not have rules of its own: it calls :func:`lipsync.motion.sequencer.plan_segments`,
+:func:`~lipsync.motion.sequencer.plan_transitions` and :func:`~lipsync.motion.sequencer.frame_specs`,
+the same functions :func:`~lipsync.motion.sequencer.sequence` is made of, on a *window* of the
 track that starts at the last **cut**.
 
 Cuts (why planning a window gives the offline frames)
@@ -46,16 +46,16 @@ the whole run.
 
 The dominance model
 -------------------
-With ``timing="dominance"`` (:mod:`lipsync.coarticulation`) the same window is planned with
+With ``timing="dominance"`` (:mod:`lipsync.motion.coarticulation`) the same window is planned with
 the model instead of rules 3-7. A sound starting at ``s`` weighs on frames after
 ``s - lead - anticipation`` only, and on nothing later than its end plus its carry-over, so:
-the look-ahead is ``lead + the longest anticipation`` (:func:`lipsync.coarticulation.lookahead`),
+the look-ahead is ``lead + the longest anticipation`` (:func:`lipsync.motion.coarticulation.lookahead`),
 where the breath before speech reaches furthest: 380 ms with the default constants and a
 map with a breath viseme (194 ms without one). A cut at ``c`` inside ``G`` is valid once
 the carry-over of every sound before ``G`` has ended (``c >= G.start + carry-over - lead``,
 and at least a frame in, for a closure's forced frame) and while no sound after ``G``
 reaches back to it (``G.end - c >= look-ahead``), which also leaves a cut pause at least
-:data:`~lipsync.coarticulation.BREATH_MIN_PAUSE_S` long, so it ends in the same breath as
+:data:`~lipsync.motion.coarticulation.BREATH_MIN_PAUSE_S` long, so it ends in the same breath as
 the whole pause: with the defaults, inside pauses and sounds of 550 ms or more. No sound
 is dropped or held, so nothing else reaches across ``G``.
 
@@ -72,10 +72,9 @@ from __future__ import annotations
 import math
 from typing import Iterable, List, Mapping, Optional, Tuple
 
-from ..sequencer import (HOLD_HALF_WIDTH_S, MAX_HELD_PAUSE_S, MAX_TRANSITION_S, FrameSpec, check_fps,
-                         frame_count, frame_specs, plan_segments, plan_transitions)
-from ..timeline import MAX_TIMELINE_S, VISEME, Segment, Timeline
-from ..timing import DEFAULT_CURVE, get_curve, is_model
+from ..motion.sequencer import HOLD_HALF_WIDTH_S, MAX_HELD_PAUSE_S, MAX_TRANSITION_S, FrameSpec, check_fps, frame_count, frame_specs, plan_segments, plan_transitions
+from ..motion.timeline import MAX_TIMELINE_S, VISEME, Segment, Timeline
+from ..motion.timing import DEFAULT_CURVE, get_curve, is_model
 
 #: Data needed past a frame's time for the frame to be final (see the module docstring):
 #: a transition starts up to half a transition before its boundary, its end depends on the
@@ -126,7 +125,7 @@ class CausalSequencer:
         self.closures = frozenset(closures)
         self.params = None      # the dominance model's constants, when it is the timing
         if is_model(timing) or not (isinstance(timing, str) or callable(timing)):
-            from .. import coarticulation as co
+            from ..motion import coarticulation as co
 
             self.params = co.as_params(timing)
             self.curve = None
@@ -249,7 +248,7 @@ class CausalSequencer:
             return []
         track = Timeline(tuple(Segment(s, e, v) for s, e, v in self._raw), kind=VISEME)
         if self.params is not None:
-            from .. import coarticulation as co
+            from ..motion import coarticulation as co
 
             segs = co.plan(track, rest=self.rest, closures=self.closures, duration=total, start=self._cut)
             classes = self.classes

@@ -1,6 +1,6 @@
 """A small pool of renderers that many live animators (server sessions) share.
 
-A :class:`lipsync.render.Renderer` keeps per-pair state (ROI-sized flows, Jacobians, maps:
+A :class:`lipsync.morphing.render.Renderer` keeps per-pair state (ROI-sized flows, Jacobians, maps:
 a few MB per viseme pair) and is not thread-safe. One renderer per live session would cost
 memory per session; one shared renderer would serialise all rendering. A pool of ``size``
 renderers (default: one per core) over one normalised bank bounds both: at most ``size``
@@ -23,8 +23,8 @@ from typing import Optional
 
 import numpy as np
 
-from ..render import Renderer
-from ..store import FlowStore
+from ..morphing.render import Renderer
+from ..morphing.store import FlowStore
 
 
 class RendererPool:

@@ -1,6 +1,6 @@
 """Phones as IPA segments with articulatory features, and the visemes they show.
 
-The room below the phoneme maps (:mod:`lipsync.phonemes`): it knows sounds, not files.
+The room below the phoneme maps (:mod:`lipsync.phonetics.phonemes`): it knows sounds, not files.
 
 * :mod:`~lipsync.phonetics.features` -- every letter of the IPA chart with its place,
   manner, voicing, height, backness, rounding, nasality, laterality (a literal table);

@@ -28,7 +28,7 @@ from typing import Optional
 
 from .._files import read_input_bytes
 from ..errors import InputError, TimelineError
-from ..timeline import PathLike, Timeline
+from ..motion.timeline import PathLike, Timeline
 from .base import READERS, Reader, ReadOptions
 
 __all__ = ["MODULES", "READERS", "Reader", "ReadOptions", "load_all", "read_timeline"]

@@ -12,7 +12,7 @@ import re
 from typing import Iterable, List, Optional, Tuple
 
 from ..errors import TimelineError
-from ..timeline import _OVERLAP_TOLERANCE_S, MAX_TIMELINE_S, Segment, Timeline
+from ..motion.timeline import _OVERLAP_TOLERANCE_S, MAX_TIMELINE_S, Segment, Timeline
 
 Row = Tuple[float, float, str, Optional[int]]
 
@@ -93,7 +93,7 @@ def build(path: str, rows: Iterable[Row], kind: str, *, stated_end: Optional[flo
     """Check rows and make a Timeline; empty labels and zero-length rows become gaps.
 
     Rules (each a TimelineError naming the file and the row's line): times are finite, not
-    negative and at most :data:`~lipsync.timeline.MAX_TIMELINE_S`; an end is not before its start; rows are in time order and do not overlap
+    negative and at most :data:`~lipsync.motion.timeline.MAX_TIMELINE_S`; an end is not before its start; rows are in time order and do not overlap
     (overlaps below ``_OVERLAP_TOLERANCE_S`` are float noise from the writing tool and are
     snapped to the previous end). ``sort=True`` is for formats whose rows are not required to
     be in order (Audacity label tracks).

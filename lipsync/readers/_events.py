@@ -11,7 +11,7 @@ from __future__ import annotations
 import re
 from typing import List, Optional, Sequence, Tuple
 
-from ..timeline import PHONEME, Timeline
+from ..motion.timeline import PHONEME, Timeline
 from ._common import Row, array_lines_at, build
 
 # A last mark has no next mark to end it; 150 ms is a typical phone length, the same
@@ -40,7 +40,7 @@ def point_rows(events: Sequence[Event]) -> List[Row]:
 
 def viseme_timeline(path: str, rows: Sequence[Row], map_name: str) -> Timeline:
     """Rows of an engine's viseme names -> a viseme timeline in the map's shapes."""
-    from ..phonemes import load_map, map_timeline
+    from ..phonetics.phonemes import load_map, map_timeline
 
     return map_timeline(build(path, rows, PHONEME), load_map(map_name))
 

@@ -9,7 +9,7 @@ are ARPAbet without stress digits, as the other readers give them; silence is ga
 
 from __future__ import annotations
 
-from ..timeline import Timeline
+from ..motion.timeline import Timeline
 from .base import READERS, Reader, ReadOptions
 
 # Magic numbers at the start of the audio containers people save speech in.

@@ -23,7 +23,7 @@ import re
 from typing import List, Optional, Tuple
 
 from ..errors import TimelineError
-from ..timeline import Timeline
+from ..motion.timeline import Timeline
 from .base import READERS, Reader, ReadOptions
 from ._common import decode_text, json_array_lines, json_time, load_json, sniff_text
 from ._events import point_rows, top_array_lines, viseme_timeline

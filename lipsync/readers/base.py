@@ -10,7 +10,7 @@ from dataclasses import dataclass
 from typing import Callable, Optional
 
 from ..registry import Registry
-from ..timeline import Timeline
+from ..motion.timeline import Timeline
 
 
 @dataclass(frozen=True)

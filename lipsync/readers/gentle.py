@@ -16,7 +16,7 @@ from __future__ import annotations
 import re
 
 from ..errors import TimelineError
-from ..timeline import PHONEME, Timeline
+from ..motion.timeline import PHONEME, Timeline
 from .base import READERS, Reader, ReadOptions
 from ._common import build, json_list, json_time, line_of, sniff_text
 

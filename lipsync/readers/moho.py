@@ -8,7 +8,7 @@ Labels are visemes (Preston Blair names from Papagayo, A-H/X from Rhubarb).
 from __future__ import annotations
 
 from ..errors import TimelineError
-from ..timeline import MAX_TIMELINE_S, VISEME, Timeline
+from ..motion.timeline import MAX_TIMELINE_S, VISEME, Timeline
 from .base import READERS, Reader, ReadOptions
 from ._common import build, decode_text, first_nonblank, parse_number, sniff_text
 

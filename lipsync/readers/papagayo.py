@@ -59,7 +59,7 @@ import warnings
 from typing import Dict, List, Tuple
 
 from ..errors import TimelineError
-from ..timeline import PHONEME, VISEME, Timeline
+from ..motion.timeline import PHONEME, VISEME, Timeline
 from .base import READERS, Reader, ReadOptions
 from ._common import build, decode_text, first_nonblank, parse_number, sniff_text
 

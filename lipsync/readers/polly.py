@@ -20,7 +20,7 @@ from __future__ import annotations
 import re
 
 from ..errors import TimelineError
-from ..timeline import PHONEME, Timeline
+from ..motion.timeline import PHONEME, Timeline
 from .base import READERS, Reader, ReadOptions
 from ._common import build, decode_text, json_time, load_json, sniff_text
 from ._events import point_rows, top_array_lines, viseme_timeline
@@ -51,7 +51,7 @@ def _marks(path: str, text: str):
 
 def read(path: str, data: bytes, options: ReadOptions) -> Timeline:
     """Read Polly speech marks (viseme marks, else word marks)."""
-    from ..phonemes import load_map
+    from ..phonetics.phonemes import load_map
 
     text = decode_text(path, data)
     names = load_map(MAP).map

@@ -12,7 +12,7 @@ import re
 from typing import Optional
 
 from ..errors import TimelineError
-from ..timeline import MAX_TIMELINE_S, VISEME, Timeline
+from ..motion.timeline import MAX_TIMELINE_S, VISEME, Timeline
 from .base import READERS, Reader, ReadOptions
 from ._common import (build, decode_text, first_nonblank, json_list, json_time, line_of, parse_number, sniff_text)
 

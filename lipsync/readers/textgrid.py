@@ -23,7 +23,7 @@ from typing import List, NamedTuple, Optional, Tuple
 from ..errors import TimelineError
 from ..phonetics.notations import ARPABET_VOWELS, detect
 from ..phonetics.segments import canonical
-from ..timeline import PHONEME, VISEME, Timeline
+from ..motion.timeline import PHONEME, VISEME, Timeline
 from .base import READERS, Reader, ReadOptions
 from ._common import build, decode_text, sniff_text
 

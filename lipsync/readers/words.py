@@ -36,7 +36,7 @@ import re
 from typing import Any, List, Optional, Tuple
 
 from ..errors import TimelineError
-from ..timeline import PHONEME, Timeline
+from ..motion.timeline import PHONEME, Timeline
 from .base import READERS, Reader, ReadOptions
 from ._common import Row, build, decode_text, json_array_lines, json_time, load_json, sniff_text
 from ._events import top_array_lines

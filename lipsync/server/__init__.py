@@ -38,7 +38,7 @@ from pathlib import Path
 from typing import Optional
 
 from ..errors import InputError, check_number
-from ..frames import DEFAULT_FPS
+from ..motion.frames import DEFAULT_FPS
 from .jobs import DEFAULT_JOB_TIMEOUT_S, DEFAULT_MAX_CLIP_S
 
 STATIC = Path(__file__).resolve().parent / "static"
@@ -119,11 +119,11 @@ class LiveServer:
 
     def __init__(self, config: ServeConfig, *, session):
         from .._data import default_bank_dir
-        from ..bank import Bank
+        from ..banks.bank import Bank
         from ..live import RendererPool
-        from ..phonemes import DEFAULT_MAP, load_map
-        from ..preprocess import preprocess
-        from ..store import FlowStore
+        from ..phonetics.phonemes import DEFAULT_MAP, load_map
+        from ..morphing.preprocess import preprocess
+        from ..morphing.store import FlowStore
         from ..web import Guard
         from .jobs import Jobs
 
@@ -155,7 +155,7 @@ class LiveServer:
         from starlette.routing import Mount, Route, WebSocketRoute
         from starlette.staticfiles import StaticFiles
 
-        from ..sequencer import check_fps
+        from ..motion.sequencer import check_fps
         from .jobs import Busy
 
         async def page(request):

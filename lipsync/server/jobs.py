@@ -3,7 +3,7 @@
 Each job gets its own folder inside the server's temporary folder; the upload is written
 there under a fixed name with the client's extension only (which picks the reader), the
 transcript (if any) beside it as a file -- a client's text is never taken as a path --,
-and :func:`lipsync.clip.render_clip` writes ``out.mp4`` there, atomically. Finished jobs
+and :func:`lipsync.pipeline.clip.render_clip` writes ``out.mp4`` there, atomically. Finished jobs
 are kept until :data:`MAX_KEPT` newer ones exist, then their folder is removed.
 
 Bounds (issue 32): a job longer than ``max_clip_seconds`` of video (a 16-byte timeline can
@@ -98,7 +98,7 @@ class Jobs:
             if not is_english(lang):
                 resolve(lang)  # UnknownLanguageError lists the codes
         if fps is not None:
-            from ..sequencer import check_fps
+            from ..motion.sequencer import check_fps
 
             fps = check_fps(fps)
         if text is not None and len(text) > MAX_TEXT_CHARS:
@@ -156,7 +156,7 @@ class Jobs:
         return clip
 
     def _run(self, job: Job, source: Path, options, fps: float) -> None:
-        from ..clip import render_clip
+        from ..pipeline.clip import render_clip
 
         job.state = "running"
         deadline = time.monotonic() + self.job_timeout

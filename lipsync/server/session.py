@@ -17,7 +17,7 @@ from typing import Optional
 import cv2
 import numpy as np
 
-from ..alpha import flatten
+from ..morphing.alpha import flatten
 from ..errors import InputError
 from ..live import LiveAnimator
 from . import protocol

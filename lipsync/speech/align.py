@@ -59,7 +59,7 @@ from typing import List, Optional, Sequence, Tuple, Union
 import numpy as np
 
 from ..errors import TranscriptMismatch
-from ..timeline import PHONEME, Segment, Timeline
+from ..motion.timeline import PHONEME, Segment, Timeline
 from .audio import SAMPLE_RATE, load_audio
 from .lexicon import _add_stress, lookup_missing, normalise_transcript, pronounce, pronunciations
 
@@ -193,7 +193,7 @@ class Alignment:
 
     Examples
     --------
-    >>> from lipsync.timeline import Segment, Timeline
+    >>> from lipsync.motion.timeline import Segment, Timeline
     >>> al = Alignment(Timeline((Segment(0.1, 0.4, "hi"),)), Timeline((Segment(0.1, 0.4, "AY1"),)), 0.5)
     >>> al.words.labels(), round(al.phones[0].duration, 2)
     (['hi'], 0.3)

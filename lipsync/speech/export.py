@@ -6,7 +6,7 @@ failure leaves nothing half-written.
 Examples
 --------
 >>> import os, tempfile
->>> from lipsync.timeline import Segment, Timeline
+>>> from lipsync.motion.timeline import Segment, Timeline
 >>> from lipsync.speech.align import Alignment
 >>> words = Timeline((Segment(0.1, 0.4, "hi"),), stated_end=0.5)
 >>> phones = Timeline((Segment(0.1, 0.2, "HH"), Segment(0.2, 0.4, "AY1")), stated_end=0.5)
@@ -49,7 +49,7 @@ def to_textgrid(alignment) -> str:
 
     Examples
     --------
-    >>> from lipsync.timeline import Segment, Timeline
+    >>> from lipsync.motion.timeline import Segment, Timeline
     >>> from lipsync.speech.align import Alignment
     >>> al = Alignment(Timeline((Segment(0.1, 0.4, "hi"),)), Timeline((Segment(0.1, 0.4, "AY1"),)), 0.5)
     >>> text = to_textgrid(al)
@@ -82,7 +82,7 @@ def to_json(alignment) -> str:
     Examples
     --------
     >>> import json
-    >>> from lipsync.timeline import Segment, Timeline
+    >>> from lipsync.motion.timeline import Segment, Timeline
     >>> from lipsync.speech.align import Alignment
     >>> al = Alignment(Timeline((Segment(0.1, 0.4, "hi"),)), Timeline((Segment(0.1, 0.4, "AY1"),)), 0.5)
     >>> json.loads(to_json(al))["phones"]
@@ -120,7 +120,7 @@ def write_alignment(alignment, path: PathLike, format: Optional[str] = None) -> 
     Examples
     --------
     >>> import os, tempfile
-    >>> from lipsync.timeline import Segment, Timeline
+    >>> from lipsync.motion.timeline import Segment, Timeline
     >>> from lipsync.speech.align import Alignment
     >>> al = Alignment(Timeline((Segment(0.1, 0.4, "hi"),)), Timeline((Segment(0.1, 0.4, "AY1"),)), 0.5)
     >>> d = tempfile.mkdtemp()

@@ -39,7 +39,7 @@ from typing import Dict, List, Optional, Sequence, Tuple
 import numpy as np
 
 from ..errors import InputError
-from ..timeline import Segment, Timeline
+from ..motion.timeline import Segment, Timeline
 from .scripts import OTHER_LANGUAGES, UnreadWordsWarning, check_english_script, script_of
 
 __all__ = ["align_language", "check_english_script", "UnreadWordsWarning", "script_of"]

@@ -13,7 +13,7 @@ the live animator alike.
 
 Examples
 --------
->>> from lipsync.timeline import Segment, Timeline
+>>> from lipsync.motion.timeline import Segment, Timeline
 >>> words = Timeline((Segment(0.0, 0.5, "Hello"), Segment(0.6, 1.0, "world!")))
 >>> phones = words_to_phones(words)
 >>> phones.labels()
@@ -27,7 +27,7 @@ from __future__ import annotations
 import re
 from typing import Dict, List, Sequence, Tuple
 
-from ..timeline import PHONEME, Segment, Timeline
+from ..motion.timeline import PHONEME, Segment, Timeline
 
 # Typical (inherent) durations of English phones in seconds, after Klatt's duration rules
 # for American English (J. Acoust. Soc. Am. 59, 1976). Only the ratios matter: a word's
@@ -129,7 +129,7 @@ def words_to_phones(words: Timeline) -> Timeline:
 
     Examples
     --------
-    >>> from lipsync.timeline import Segment, Timeline
+    >>> from lipsync.motion.timeline import Segment, Timeline
     >>> tl = words_to_phones(Timeline((Segment(0.2, 0.53, "Hi."),), stated_end=1.0))
     >>> [(s.label, round(s.start, 2), round(s.end, 2)) for s in tl], tl.duration
     ([('HH', 0.2, 0.28), ('AY', 0.28, 0.53)], 1.0)

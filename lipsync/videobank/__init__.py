@@ -2,7 +2,7 @@
 
 The room sits beside :mod:`lipsync.banks` (banks from images) and builds on the rooms below
 it: :mod:`lipsync.face` (landmarks, tracking, lines from a face), :mod:`lipsync.speech`
-(alignment), :mod:`lipsync.preprocess` (flows). One module per step, each a function over a
+(alignment), :mod:`lipsync.morphing.preprocess` (flows). One module per step, each a function over a
 typed value, run in order by :func:`make_bank`:
 
 * :mod:`.sources` — the videos and their transcripts, checked before any long work;

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 from typing import Optional, Tuple
 
 from ..errors import InputError
-from ..phonemes import DEFAULT_MAP
+from ..phonetics.phonemes import DEFAULT_MAP
 
 #: Without ``--size`` the bank keeps the video's own scale (no detail invented, none lost),
 #: but its longer side is held to this: the flows' cost and the renderer's grow with the

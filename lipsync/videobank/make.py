@@ -98,7 +98,7 @@ class Pictures:
 #: coarticulation model (issue 21), measured closer to real lips than the rule-based
 #: sequencer on GRID s1's held-out sentences, rendered with a bank from this function
 #: (``python -m lipsync.bench --only coarticulation_rendered``). Its default constants:
-#: fitting them to the speaker (lipsync.coarticulation.fit_speaker) measured no better there.
+#: fitting them to the speaker (lipsync.motion.coarticulation.fit_speaker) measured no better there.
 TIMING = "dominance"
 
 #: Median stabilisation residual (eye distances) of the chosen frames above which the head
@@ -186,7 +186,7 @@ def make_bank(outdir: PathLike, videos: Sequence[PathLike], *, text: Optional[st
         raise TypeError("give either config or keyword options, not both")
     outdir = Path(os.fspath(outdir))
     from . import write
-    from ..phonemes import load_map
+    from ..phonetics.phonemes import load_map
     from .sources import find_sources
 
     inputs = _inputs(videos, text)
@@ -396,7 +396,7 @@ def assemble(outdir: Path, footage: Footage, ranked: Dict[str, List[Candidate]],
              cfg: VideoBankConfig, seconds: Dict[str, float], inputs: Sequence[PathLike] = ()) -> VideoBankResult:
     """Borrow shapes for visemes never shown, match the colour, place the lines, and write
     the bank (PNGs, bank.yaml, report, preview, flows) all at once."""
-    from ..bank import Bank
+    from ..banks.bank import Bank
     from ..banks.yamlio import write_bank_text
     from ..face.lines import SYMMETRIC_BELOW, face_asymmetry, face_features
     from . import colour, write
@@ -499,7 +499,7 @@ def assemble(outdir: Path, footage: Footage, ranked: Dict[str, List[Candidate]],
         write.write_preview(tmp / write.PREVIEW_NAME, bank)
         seconds["write"] = time.perf_counter() - t
         if cfg.flows:
-            from ..preprocess import preprocess
+            from ..morphing.preprocess import preprocess
 
             t = time.perf_counter()
             preprocess(bank, jobs=cfg.jobs, quiet=cfg.quiet)

@@ -55,7 +55,7 @@ from ..face import topology as T
 #: phones last 60-200 ms).
 STEADY_TRIM = 0.25
 #: Only a silence this long shows the mouth at rest: the sequencer holds the last shape
-#: through shorter pauses (:data:`lipsync.sequencer.MAX_HELD_PAUSE_S`, 0.2 s), and so do
+#: through shorter pauses (:data:`lipsync.motion.sequencer.MAX_HELD_PAUSE_S`, 0.2 s), and so do
 #: speakers; a longer one leaves a relaxed middle once the guards below are taken off.
 REST_MIN_S = 0.35
 #: Silence frames closer than this to speech are not rest candidates: lips part ~100-200 ms
@@ -92,7 +92,7 @@ CLOSURE_OPENING_PERCENTILE = 10
 #: (``rest + SPAN_GAIN * (median - rest)``), not near the median itself. A viseme's
 #: candidates are every instance of it in every context; the renderer reaches a picture
 #: only in the middle of a held sound and coarticulation pulls it towards its neighbours
-#: (lipsync.coarticulation), so median pictures render a mouth that opens 0.58 times as
+#: (lipsync.motion.coarticulation), so median pictures render a mouth that opens 0.58 times as
 #: much as the speaker's (std of the rendered inner-lip opening over the real one's; GRID
 #: s1, 30 held-out sentences, ``python -m lipsync.bench --only videobank_range``). Scaling
 #: the open shapes alike from the rest keeps the pattern of openings the timing blends (the

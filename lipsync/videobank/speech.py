@@ -9,8 +9,8 @@ map's silence viseme: the rest shape.
 
 Examples
 --------
->>> from lipsync.timeline import Segment, Timeline
->>> from lipsync.phonemes import load_map
+>>> from lipsync.motion.timeline import Segment, Timeline
+>>> from lipsync.phonetics.phonemes import load_map
 >>> tl = Timeline((Segment(0.5, 0.6, "S"), Segment(0.6, 0.7, "T"), Segment(0.7, 0.9, "AA1")),
 ...               stated_end=1.5)
 >>> [(s.label, s.start, s.end) for s in viseme_spans(tl, load_map("english-to-rhubarb"))]
@@ -24,8 +24,8 @@ from dataclasses import dataclass
 from typing import List, Optional, Tuple
 
 from ..errors import InputError
-from ..phonemes import PhonemeMap, map_timeline
-from ..timeline import Segment, Timeline
+from ..phonetics.phonemes import PhonemeMap, map_timeline
+from ..motion.timeline import Segment, Timeline
 from .sources import Source
 
 

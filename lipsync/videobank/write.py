@@ -233,7 +233,7 @@ def bank_text(name: str, rest: str, files: Mapping[str, str], features: Mapping[
 
 
 def write_png(path: Path, rgb: np.ndarray) -> None:
-    from ..preview import save_png
+    from ..encode.preview import save_png
 
     save_png(path, rgb)
 
@@ -247,7 +247,7 @@ def write_report(path: Path, report: dict) -> None:
 
 def write_preview(path: Path, bank) -> None:
     """The preview sheet (``lipsync preview``'s): every viseme with its lines and names."""
-    from ..preview import feature_lines, preview_sheet, save_png
+    from ..encode.preview import feature_lines, preview_sheet, save_png
 
     named = {v: feature_lines(bank.line_names, bank.lines[v]) for v in bank.names}
     save_png(path, preview_sheet({v: bank.images[v] for v in bank.names}, named,

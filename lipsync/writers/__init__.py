@@ -13,7 +13,7 @@ for cue (times to the precision each format stores; Moho to whole frames).
 Examples
 --------
 >>> import os, tempfile
->>> from lipsync.timeline import Segment, Timeline
+>>> from lipsync.motion.timeline import Segment, Timeline
 >>> from lipsync.readers import read_timeline
 >>> cues = Timeline((Segment(0, 0.2, "X"), Segment(0.2, 0.5, "A"), Segment(0.5, 0.8, "X")), kind="viseme")
 >>> out = os.path.join(tempfile.mkdtemp(), "cues.tsv")
@@ -32,8 +32,8 @@ from pathlib import Path
 from typing import Iterable, List, Mapping, Optional, Sequence, Tuple, Union
 
 from ..errors import InputError
-from ..timeline import MAX_TIMELINE_S, Segment, Timeline
-from ..timing import DEFAULT_CURVE
+from ..motion.timeline import MAX_TIMELINE_S, Segment, Timeline
+from ..motion.timing import DEFAULT_CURVE
 from .base import DEFAULT_FPS, DEFAULT_TIER, WRITERS, Cue, CueOptions, PathLike, Writer
 
 __all__ = ["DEFAULT_FPS", "DEFAULT_TIER", "WRITERS", "Cue", "CueOptions", "Writer", "cue_track", "format_for",
@@ -47,7 +47,7 @@ def cue_track(cues: Union[Timeline, Sequence[Cue]], *, rest: str,
     Parameters
     ----------
     cues : Timeline or sequence of (start, end, viseme)
-        Sorted, non-overlapping (a :class:`~lipsync.timeline.Timeline` guarantees it).
+        Sorted, non-overlapping (a :class:`~lipsync.motion.timeline.Timeline` guarantees it).
     rest : str
         Viseme for gaps.
     duration : float, optional
@@ -131,14 +131,14 @@ def write_cues(cues: Union[Timeline, Sequence[Cue]], path: PathLike, format: Opt
     duration : float, optional
         End of the track (default: the timeline's duration).
     timing : str or DominanceParams
-        How the mouth moves, as :func:`lipsync.sequencer.sequence` takes it (the atlas
+        How the mouth moves, as :func:`lipsync.motion.sequencer.sequence` takes it (the atlas
         frames are the sequencer's frames).
     timeline : Timeline, optional
         The viseme timeline the cues were planned from (the atlas frames sequence it, as
         ``render`` does; default: the cues).
     classes : mapping, optional
         Viseme -> class, for the dominance timing model
-        (:func:`lipsync.coarticulation.viseme_classes`).
+        (:func:`lipsync.motion.coarticulation.viseme_classes`).
     atlas : Atlas, optional
         For ``atlas``: the sprite atlas (:func:`lipsync.atlas.load_atlas`) whose cells the
         frames name.
@@ -188,7 +188,7 @@ def _copy_classes(classes):
     # breath viseme (the dominance model shows it before speech).
     if classes is None:
         return None
-    from ..coarticulation import VisemeClasses
+    from ..motion.coarticulation import VisemeClasses
 
     return VisemeClasses(classes, breath=getattr(classes, "breath", None))
 

@@ -1,6 +1,6 @@
 """Atlas frames (``frames.json``): the sprite-atlas cell of every frame at ``fps``.
 
-The frames are the sequencer's: :func:`lipsync.sequencer.sequence` of the viseme timeline
+The frames are the sequencer's: :func:`lipsync.motion.sequencer.sequence` of the viseme timeline
 the cues were planned from (``options.timeline``, else the cue track), with the timing,
 closures and classes ``render`` uses, so exactly the FrameSpecs ``lipsync render`` draws;
 each becomes the nearest cell of the atlas (:mod:`lipsync.atlas.frames`). The document is
@@ -22,8 +22,8 @@ def render(cues: Sequence[Cue], options: CueOptions) -> str:
     """The frames.json text for a planned cue track."""
     from ..atlas.frames import quantise
     from ..atlas.schema import Atlas, frames_document
-    from ..sequencer import sequence
-    from ..timeline import VISEME, Segment, Timeline
+    from ..motion.sequencer import sequence
+    from ..motion.timeline import VISEME, Segment, Timeline
 
     atlas = options.atlas
     if not isinstance(atlas, Atlas):

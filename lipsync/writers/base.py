@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 from typing import Callable, FrozenSet, Mapping, Optional, Sequence, Tuple, Union
 
 from ..registry import Registry
-from ..timing import DEFAULT_CURVE
+from ..motion.timing import DEFAULT_CURVE
 
 PathLike = Union[str, "os.PathLike[str]"]
 
@@ -47,7 +47,7 @@ class CueOptions:
         when cues share a frame.
     timing : str or DominanceParams
         How the mouth moves (formats holding frames, the atlas frames): what
-        :func:`lipsync.sequencer.sequence` takes as ``timing``.
+        :func:`lipsync.motion.sequencer.sequence` takes as ``timing``.
     timeline : Timeline, optional
         The viseme timeline the cues were planned from (formats holding frames sequence it
         as ``render`` does; default: the cues themselves).

@@ -42,8 +42,8 @@ def basic_shapes_track(timeline, pmap, base, shapes: str):
 
     Examples
     --------
-    >>> from lipsync.phonemes import load_map
-    >>> from lipsync.timeline import Segment, Timeline
+    >>> from lipsync.phonetics.phonemes import load_map
+    >>> from lipsync.motion.timeline import Segment, Timeline
     >>> m = load_map("rhubarb")
     >>> tl = Timeline((Segment(0, 1, "G"), Segment(1, 2, "H"), Segment(2, 3, "D")), kind="viseme")
     >>> basic_shapes_track(tl, m, m, "basic").labels()

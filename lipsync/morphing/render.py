@@ -10,13 +10,13 @@ Methods (registry :data:`METHODS`):
     Gather. Output pixel Y takes A at the X that moves onto it, ``X + alpha F(X) = Y``,
     and likewise B with ``(1 - alpha)`` and the backward flow. Those inversions are
     per-pair work, so preprocessing solves them (Newton's method,
-    :func:`lipsync.flows.inverse_tables`) at t = k / TABLE_STEPS on a coarse grid and the
-    store keeps them (:mod:`lipsync.store`). A frame interpolates the four nearest tables
+    :func:`lipsync.morphing.flows.inverse_tables`) at t = k / TABLE_STEPS on a coarse grid and the
+    store keeps them (:mod:`lipsync.morphing.store`). A frame interpolates the four nearest tables
     in t with a cubic on the coarse grid, then one fused pass reads both displacements
     bilinearly, samples both images and blends: about two image lookups and a blend per
     pixel, whatever the subject. Only the box where the (dead-zoned) flows are non-zero or
     the images differ is rendered; the rest of the frame is the common background. The
-    pass is compiled C with AVX-512 or AVX2 gathers (:mod:`lipsync._flowkernel`, chosen
+    pass is compiled C with AVX-512 or AVX2 gathers (:mod:`lipsync.morphing._flowkernel`, chosen
     at run time by CPU); without it (no compiler at install, or a CPU without AVX2) a numba
     kernel does the same in fixed point (:data:`KERNELS`).
 ``splat``
@@ -33,7 +33,7 @@ Methods (registry :data:`METHODS`):
 
 Transparency: a bank with transparency (:attr:`lipsync.Bank.channels` 4) renders RGBA
 ``(H, W, 4)`` frames with straight alpha; every method resamples and blends premultiplied
-values (:mod:`lipsync.alpha`), so a morphing edge neither darkens nor takes the hidden
+values (:mod:`lipsync.morphing.alpha`), so a morphing edge neither darkens nor takes the hidden
 colour of transparent pixels. The compiled kernel reads the premultiplied alpha in its
 fourth byte; the numba kernel reads it from a plane beside the packed colours. An opaque
 bank takes exactly the RGB path it always did (same frames, same speed).
@@ -52,11 +52,11 @@ import cv2
 import numpy as np
 
 from .alpha import blend_premultiplied, premultiply, unpremultiply
-from .bank import Bank
-from .errors import InputError
+from ..banks.bank import Bank
+from ..errors import InputError
 from .preprocess import bank_pair_flows
 from .normalise import NormalisedBank, normalise
-from .registry import Registry
+from ..registry import Registry
 from .store import Crop, FlowStore, InverseTables, StoredField, StoreWarning, pack_pair, union_box, unpack_pair
 from .warp import beier_neely_map, identity_grid
 
@@ -345,7 +345,7 @@ class Renderer:
         ``(H, W, 4)`` for a bank with transparency).
 
         Without ``out`` the returned array is the renderer's own buffer, overwritten by the
-        next call: copy it to keep it. With ``region`` (a :class:`~lipsync.store.Crop`, flow
+        next call: copy it to keep it. With ``region`` (a :class:`~lipsync.morphing.store.Crop`, flow
         and splat methods, with ``out``) only the pixels inside it are made right (those
         outside are left as they were, or rendered where the region's rows cross the moving
         part): a caller that reads one box of the frame (the lower face composited onto a
@@ -452,7 +452,7 @@ class Renderer:
         """The coarse inverse displacement ``X - Y`` a frame uses, float32 ``(hc, wc, 2)``.
 
         ``side`` "a" is the first image at ``t = alpha``, "b" the second at
-        ``t = 1 - alpha``; the grid is :func:`lipsync.flows.coarse_points` of the pair's box
+        ``t = 1 - alpha``; the grid is :func:`lipsync.morphing.flows.coarse_points` of the pair's box
         (``self._pair(a, b).box``). For tests and figures.
         """
         pair = self._pair(from_viseme, to_viseme)
@@ -687,7 +687,7 @@ def _fill_coarse(inv: InverseTables, t: float, out: np.ndarray) -> None:
 
 
 def _numba_kernels():
-    from . import _numba_kernels as nk  # numba loads only for the portable kernel
+    from . import _numba_kernels as nk  # numba loads only for the portable kernel  # numba loads only for the portable kernel
 
     return nk
 

@@ -4,7 +4,7 @@ Faces are close to symmetric but never exactly. When a bank asks for ``symmetry:
 every viseme's lines are replaced by the nearest exactly symmetric set (each line averaged
 with its mirror partner's reflection) and the image is warped onto those lines with
 bilinear resampling. Flows between symmetric line sets are mirror-symmetric, so only half
-of each field has to be computed (see :mod:`lipsync.flows`).
+of each field has to be computed (see :mod:`lipsync.morphing.flows`).
 
 The mirror axis is vertical, ``x = axis``. It is the median over visemes of each viseme's
 own axis estimate, rounded to half a pixel: half-pixel positions map pixel centres onto
@@ -19,7 +19,7 @@ from typing import Dict, Optional, Sequence, Tuple
 
 import numpy as np
 
-from .bank import Bank, mirror_partner_index
+from ..banks.bank import Bank, mirror_partner_index
 from .warp import beier_neely_map, warp
 
 
@@ -147,7 +147,7 @@ def normalise(bank: Bank, *, interpolation: str = "linear", cache=None) -> Norma
 
     Examples
     --------
-    >>> from lipsync.bank import Bank
+    >>> from lipsync.banks.bank import Bank
     >>> from lipsync._data import default_bank_dir
     >>> nb = normalise(Bank.load(default_bank_dir()))
     >>> nb.axis is not None

@@ -2,14 +2,14 @@
 
 A :class:`Timeline` is an immutable, sorted sequence of non-overlapping :class:`Segment`
 objects (start and end in seconds, a label). ``kind`` says whether the labels are phonemes
-(to be mapped to visemes by :mod:`lipsync.phonemes`) or already visemes (Rhubarb, Moho).
+(to be mapped to visemes by :mod:`lipsync.phonetics.phonemes`) or already visemes (Rhubarb, Moho).
 
 Silence convention
 ------------------
 Intervals that carry **no label** in the file (an empty TextGrid interval, the time between
 two Audacity labels, a Gentle word that was not found in the audio) are **left out**: they
 are gaps between segments. Labels that *name* silence (``sil``, ``sp``, ``h#``, ``pau``, ...)
-are kept as the file writes them. The phoneme mapper (:func:`lipsync.phonemes.map_timeline`)
+are kept as the file writes them. The phoneme mapper (:func:`lipsync.phonetics.phonemes.map_timeline`)
 turns both gaps and silence labels into the rest viseme, and the sequencer also shows rest in
 any gap left in a viseme timeline, so a reader never has to invent segments.
 
@@ -31,7 +31,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Iterator, Optional, Sequence, Tuple, Union, overload
 
-from .errors import InputError, TimelineError
+from ..errors import InputError, TimelineError
 
 PathLike = Union[str, "os.PathLike[str]"]
 

@@ -189,7 +189,7 @@ def warp_rgba(image: np.ndarray, inverse_map: np.ndarray, *, interpolation: int 
 
     Examples
     --------
-    >>> from lipsync.warp import identity_grid
+    >>> from lipsync.morphing.warp import identity_grid
     >>> img = np.random.default_rng(0).integers(0, 256, (5, 6, 4), dtype=np.uint8); img[..., 3] = 255
     >>> bool((warp_rgba(img, identity_grid(img.shape[:2])) == img).all())
     True

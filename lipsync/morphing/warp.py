@@ -18,10 +18,10 @@ and it is affine in (x, y): per line every quantity is a sum of a row part and a
 part, so a pixel costs adds, one square root and one division per line.
 
 The per-pixel loop is compiled (``beier_neely_field`` in lipsync/_flowkernel.c, GCC's
-vectorised AVX2 copy where the CPU has it; numba's copy in lipsync._numba_kernels when the
+vectorised AVX2 copy where the CPU has it; numba's copy in lipsync.morphing._numba_kernels when the
 extension is not built): one pass over each block of pixels instead of numpy's ~15 passes
 per line, and without the GIL, so preprocessing computes pairs in threads of the calling
-process (no worker processes, which a library must not start; see lipsync.preprocess).
+process (no worker processes, which a library must not start; see lipsync.morphing.preprocess).
 """
 
 from __future__ import annotations
@@ -30,7 +30,7 @@ from typing import Optional, Tuple
 
 import numpy as np
 
-try:  # the compiled field kernel; numba's copy (lipsync._numba_kernels) when it is not built
+try:  # the compiled field kernel; numba's copy (lipsync.morphing._numba_kernels) when it is not built
     from . import _flowkernel as _compiled
 except ImportError:  # pragma: no cover - depends on the install
     _compiled = None
@@ -145,7 +145,7 @@ def beier_neely_displacement(shape: Tuple[int, ...], *, dst_lines, src_lines, a:
         _compiled.beier_neely_field(xs, ys, table, out, width, h, len(table), int(BLOCK_COLUMNS),
                                     float(a), float(b), 0 if kernel == "plain" else 2)
     else:
-        from ._numba_kernels import beier_neely_field  # numba loads only without the compiled kernel
+        from ._numba_kernels import beier_neely_field  # numba loads only without the compiled kernel  # numba loads only without the compiled kernel
 
         beier_neely_field(xs, ys, table, float(a), float(b), int(BLOCK_COLUMNS), out)
     return out

@@ -1,14 +1,14 @@
 """What every timing model produces and starts from: frames, and the plain viseme track.
 
-Both timing models (the rule-based sequencer, :mod:`lipsync.sequencer`, and the dominance
-model, :mod:`lipsync.coarticulation`) give one :class:`FrameSpec` per output frame, frame n
+Both timing models (the rule-based sequencer, :mod:`lipsync.motion.sequencer`, and the dominance
+model, :mod:`lipsync.motion.coarticulation`) give one :class:`FrameSpec` per output frame, frame n
 showing time ``n / fps``, and both start from the same track (:func:`base_track`: the
 sequencer's rules 1 and 2). They live here, below both, so that neither imports the other
 for them.
 
 Examples
 --------
->>> from lipsync.timeline import Segment, Timeline
+>>> from lipsync.motion.timeline import Segment, Timeline
 >>> base_track(Timeline((Segment(0.2, 0.5, "A"), Segment(0.5, 0.6, "A")), kind="viseme"), rest="X", duration=1.0)
 [Segment(start=0.0, end=0.2, label='X'), Segment(start=0.2, end=0.6, label='A'), Segment(start=0.6, end=1.0, label='X')]
 """
@@ -19,7 +19,7 @@ import math
 from dataclasses import dataclass
 from typing import List, Optional, Tuple
 
-from .errors import InputError
+from ..errors import InputError
 from .timeline import MAX_TIMELINE_S, VISEME, Segment, Timeline
 
 #: Most frames one timeline may make: 11 hours at 25 fps, longer than any speech track, and

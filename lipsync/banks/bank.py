@@ -39,10 +39,10 @@ import numpy as np
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
-from . import _yaml
-from .coarticulation import DominanceOverrides, DominanceParams
-from .errors import BankError, InputError
-from .timing import check_timing
+from .. import _yaml
+from ..motion.coarticulation import DominanceOverrides, DominanceParams
+from ..errors import BankError, InputError
+from ..motion.timing import check_timing
 
 
 #: Refuse images above this many pixels (8K UHD): a decompression bomb or a mistake, and
@@ -174,12 +174,12 @@ class _BankSpec(BaseModel):
     rest: str
     warp: WarpParams = WarpParams()
     symmetry: bool = False
-    # Refine the line flows with optical flow at preprocess time (lipsync.refine, issue 22).
+    # Refine the line flows with optical flow at preprocess time (lipsync.morphing.refine, issue 22).
     refine: bool = True
-    # How this subject's mouth moves when a render does not say (lipsync.timing): a curve
+    # How this subject's mouth moves when a render does not say (lipsync.motion.timing): a curve
     # name or "dominance"; banks made from video set "dominance" (issue 21).
     timing: Optional[str] = None
-    # The dominance model's constants fitted to this speaker (lipsync.coarticulation).
+    # The dominance model's constants fitted to this speaker (lipsync.motion.coarticulation).
     coarticulation: Optional[DominanceOverrides] = None
     visemes: Dict[str, _VisemeSpec]
     composite: Optional[_CompositeSpec] = None
@@ -360,7 +360,7 @@ class Bank:
         Viseme name -> RGB ``uint8`` ``(H, W, 3)`` image; or, when any image of the bank has
         transparency, RGBA ``(H, W, 4)`` with straight alpha for every viseme (images without
         an alpha channel get alpha 255). An RGBA file whose alpha is 255 everywhere loads as
-        RGB: an opaque bank is opaque however its files were saved (see :mod:`lipsync.alpha`).
+        RGB: an opaque bank is opaque however its files were saved (see :mod:`lipsync.morphing.alpha`).
     lines : dict
         Viseme name -> float64 ``(L, 2, 2)`` control lines in ``line_names`` order
         (curves already expanded into segments ``name#i``).
@@ -373,10 +373,10 @@ class Bank:
         lands on body pixel (x, y), scaled by s; see :mod:`lipsync.composite`).
     timing : str or None
         bank.yaml's ``timing``: how this subject's mouth moves when a render does not say
-        (a timing curve name or ``dominance``; see :func:`lipsync.coarticulation.resolve_timing`).
+        (a timing curve name or ``dominance``; see :func:`lipsync.motion.coarticulation.resolve_timing`).
     coarticulation : DominanceParams or None
         bank.yaml's ``coarticulation``: the dominance model's constants fitted to this
-        speaker (keys it leaves out keep :data:`lipsync.coarticulation.DEFAULT_PARAMS`).
+        speaker (keys it leaves out keep :data:`lipsync.motion.coarticulation.DEFAULT_PARAMS`).
     plate : PlateFiles or None
         bank.yaml's ``plate``: the idle stretch of the speaker's video a render composites
         the morphed lower face onto (banks made from video; ``enabled: false`` turns it off).
@@ -641,7 +641,7 @@ def read_image(path: Path) -> np.ndarray:
     >>> read_image(default_bank_dir() / "X.png").shape
     (512, 512, 3)
     """
-    from .errors import InputError
+    from ..errors import InputError
 
     try:
         return _read_image(Path(path), str(path), Path(path), None)
@@ -733,7 +733,7 @@ def bank_path(name_or_path: Union[str, os.PathLike]) -> Path:
     text = os.fspath(name_or_path)
     if path.exists() or not _SUBJECT_NAME.match(text):
         return path
-    from ._data import shipped_banks
+    from .._data import shipped_banks
 
     shipped = shipped_banks()
     if text in shipped:

@@ -37,7 +37,7 @@ is the closer guess; falling back to the line flow where the refined flows disag
 change); more line segments on the lips and jaw (no change).
 
 Drawings: the synthetic-truth test and the toon's figures are measured with it on; a bank
-can turn it off with ``refine: false`` (see :mod:`lipsync.bank`).
+can turn it off with ``refine: false`` (see :mod:`lipsync.banks.bank`).
 
 Examples
 --------
@@ -95,7 +95,7 @@ def mirror_average(field: np.ndarray, axis: float) -> np.ndarray:
     """``field`` averaged with its mirror image about ``x = axis`` (x component negated).
 
     Columns whose mirror falls outside the picture are kept as they are. The result is
-    exactly symmetric (the two halves are the same sums), as :mod:`lipsync.store`'s half
+    exactly symmetric (the two halves are the same sums), as :mod:`lipsync.morphing.store`'s half
     storage needs.
 
     Examples
@@ -265,7 +265,7 @@ def fold_measure(flow: np.ndarray) -> np.ndarray:
     >>> float(fold_measure(f).min()) < 0
     True
     """
-    # central differences (OpenCV's: the edge pixels repeat, where lipsync.flows.flow_jacobian
+    # central differences (OpenCV's: the edge pixels repeat, where lipsync.morphing.flows.flow_jacobian
     # takes one-sided ones; a fold test does not care, and this is the refinement's inner loop)
     fx = np.ascontiguousarray(flow[..., 0])
     fy = np.ascontiguousarray(flow[..., 1])

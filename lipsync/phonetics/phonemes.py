@@ -29,7 +29,7 @@ stop); a pinyin timeline (``j``, ``ing1``, ``iii4``) is read as pinyin.
 
 Examples
 --------
->>> from lipsync.timeline import Segment, Timeline
+>>> from lipsync.motion.timeline import Segment, Timeline
 >>> pmap = load_map("english-to-rhubarb")
 >>> tl = Timeline((Segment(0, .1, "sil"), Segment(.1, .2, "M"), Segment(.2, .4, "AY1")))
 >>> [(s.label, round(s.end, 2)) for s in map_timeline(tl, pmap)]
@@ -47,13 +47,13 @@ from typing import Any, Dict, Iterable, List, Mapping, Optional, Sequence, Tuple
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
-from . import phonetics
-from ._data import data_dir
-from .errors import MapError, TimelineError, UnknownNameError
-from .phonetics import visemes as _rules
-from .phonetics.segments import parse_sequence as _parse_sequence
-from .registry import Registry
-from .timeline import VISEME, Segment, Timeline
+from .. import phonetics
+from .._data import data_dir
+from ..errors import MapError, TimelineError, UnknownNameError
+from . import visemes as _rules
+from .segments import parse_sequence as _parse_sequence
+from ..registry import Registry
+from ..motion.timeline import VISEME, Segment, Timeline
 
 PathLike = Union[str, "os.PathLike[str]"]
 
@@ -350,7 +350,7 @@ def _load_yaml_model(model, path: Path, error):
         raise error(f"not UTF-8 text ({exc.reason})", path=path) from None
     except OSError as exc:
         raise error(f"cannot read: {exc.strerror or exc}", path=path) from None
-    from ._yaml import safe_load
+    from .._yaml import safe_load
 
     try:
         data = safe_load(text)  # yaml.safe_load, but a key given twice is an error naming both lines
@@ -457,7 +457,7 @@ def map_timeline(timeline: Timeline, pmap: PhonemeMap, *, rest: Optional[str] = 
     Examples
     --------
     >>> import warnings
-    >>> from lipsync.timeline import Segment, Timeline
+    >>> from lipsync.motion.timeline import Segment, Timeline
     >>> tl = Timeline((Segment(0, .1, "pau"), Segment(.1, .2, "zzz")))
     >>> with warnings.catch_warnings(record=True) as w:
     ...     warnings.simplefilter("always")
@@ -589,7 +589,7 @@ def canonical_viseme_timeline(timeline: Timeline, pmap: PhonemeMap) -> Timeline:
 
     Examples
     --------
-    >>> from lipsync.timeline import Segment, Timeline
+    >>> from lipsync.motion.timeline import Segment, Timeline
     >>> tl = Timeline((Segment(0, 1, "rest"), Segment(1, 2, "E"), Segment(2, 3, "MBP")), kind="viseme")
     >>> canonical_viseme_timeline(tl, load_map("rhubarb")).labels()
     ['X', 'C', 'A']
@@ -633,11 +633,11 @@ def bank_viseme_timeline(timeline: Timeline, pmap: PhonemeMap, viseme_names: Opt
     -------
     (Timeline, PhonemeMap)
         The viseme timeline covering the whole file, and the map in the bank's names (its
-        ``closures`` are what :func:`lipsync.sequencer.sequence` wants).
+        ``closures`` are what :func:`lipsync.motion.sequencer.sequence` wants).
 
     Examples
     --------
-    >>> from lipsync.timeline import Segment, Timeline
+    >>> from lipsync.motion.timeline import Segment, Timeline
     >>> tl = Timeline((Segment(0, 0.2, "M"), Segment(0.2, 0.5, "AA")), kind="phoneme")
     >>> vt, m = bank_viseme_timeline(tl, load_map("rhubarb"), "ABCDEFGHX", rest="X")
     >>> vt.labels(), m.closures

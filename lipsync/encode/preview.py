@@ -21,7 +21,7 @@ from collections.abc import Mapping, Sequence
 import cv2
 import numpy as np
 
-from ._files import atomic_write_bytes
+from .._files import atomic_write_bytes
 
 __all__ = ["draw_lines", "feature_lines", "preview_sheet", "strip", "save_png"]
 
@@ -222,7 +222,7 @@ def _resize_to_width(img: np.ndarray, width: int | None) -> tuple[np.ndarray, fl
     h = max(1, round(img.shape[0] * f))
     interp = cv2.INTER_AREA if f < 1 else cv2.INTER_CUBIC
     if img.shape[2] == 4:  # resampled premultiplied: no dark rim around transparency
-        from .alpha import resize_rgba
+        from ..morphing.alpha import resize_rgba
 
         return resize_rgba(img, (width, h), interpolation=interp), f
     return cv2.resize(img, (width, h), interpolation=interp), f

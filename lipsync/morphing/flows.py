@@ -17,7 +17,7 @@ from typing import Optional, Sequence, Tuple
 
 import numpy as np
 
-from .bank import WarpParams
+from ..banks.bank import WarpParams
 from .normalise import is_symmetric
 from .warp import beier_neely_displacement
 
@@ -81,7 +81,7 @@ def flow_field(shape: Tuple[int, ...], dst_lines: np.ndarray, src_lines: np.ndar
 
     Examples
     --------
-    >>> from lipsync.bank import WarpParams
+    >>> from lipsync.banks.bank import WarpParams
     >>> a = np.array([[[2.0, 2.0], [2.0, 8.0]]]); b = a + [1.0, 0.0]
     >>> float(flow_field((10, 10), a, b, WarpParams())[5, 5, 0])
     1.0
@@ -110,7 +110,7 @@ def pair_flows(shape: Tuple[int, ...], lines_a: np.ndarray, lines_b: np.ndarray,
 
     Examples
     --------
-    >>> from lipsync.bank import WarpParams
+    >>> from lipsync.banks.bank import WarpParams
     >>> a = np.array([[[2.0, 2.0], [2.0, 8.0]]]); b = a + [0.0, 1.0]
     >>> fwd, bwd = pair_flows((10, 10), a, b, WarpParams())
     >>> float(fwd[4, 4, 1]), float(bwd[4, 4, 1])
@@ -146,7 +146,7 @@ MAX_STEP = 4.0
 SOLVE_STEP = 2
 #: Tables at t = k / TABLE_STEPS, k = 1..TABLE_STEPS (t = 0 is the identity, not stored).
 #: The renderer interpolates the four nearest in t with a cubic; 4 steps keep the store at
-#: 4 bytes per field pixel for whole-frame motion (see lipsync.store) and the residual of
+#: 4 bytes per field pixel for whole-frame motion (see lipsync.morphing.store) and the residual of
 #: X + t F(X) = Y under 0.05 px at ~99% of the pixels where a per-frame Newton solve gets it
 #: there (measured in tests/test_render.py).
 TABLE_STEPS = 4

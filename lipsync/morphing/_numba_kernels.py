@@ -1,9 +1,9 @@
-"""The portable numba kernels: the fallback when lipsync._flowkernel is not built (the
+"""The portable numba kernels: the fallback when lipsync.morphing._flowkernel is not built (the
 Beier-Neely field, yuv420p conversion) or the CPU lacks AVX2 (frame kernel, table combine).
 
 Imported only when used (numba's import and its on-disk cache load cost ~0.3 s, a fifth of
 a short `lipsync render`); compiled once and cached on disk. The same contracts as the
-compiled kernel's, see lipsync.render and lipsync.yuv.
+compiled kernel's, see lipsync.morphing.render and lipsync.encode.yuv.
 """
 
 import numba as _nb
@@ -13,11 +13,11 @@ import numpy as np
 
 @_nb.njit(cache=True, nogil=True, fastmath=True, boundscheck=False)
 def beier_neely_field(xs, ys, coef, a, b, block, out):  # pragma: no cover - compiled
-    """out (h, w, 2) float32 = Beier-Neely displacement at the pixels ys x xs (lipsync.warp).
+    """out (h, w, 2) float32 = Beier-Neely displacement at the pixels ys x xs (lipsync.morphing.warp).
 
     The compiled ``beier_neely_field`` (lipsync/_flowkernel.c) in numba: ``coef`` (L, 14)
     float64 holds each line's affine coefficients in the order of
-    :data:`lipsync.warp._COEF_ORDER`; each quantity is a column part (``c * x``) plus a row
+    :data:`lipsync.morphing.warp._COEF_ORDER`; each quantity is a column part (``c * x``) plus a row
     part (``c * y + c0``), each rounded to float32 before they are added; columns go in
     blocks of ``block`` whose column parts stay in cache. Without the GIL, like the C copy.
     """
@@ -229,7 +229,7 @@ def warp_blend_rgba(pa, pb, aa, ab, da, db, by0, bx0, bh, bw, step, ry0, ry1, rx
 
 # int32 values keep the arithmetic in 32 bits (numba would widen to int64 around Python
 # ints); with luma in its own row loop this measured 1.1 ms per 1280x720 frame against 1.5
-# ms for one int64 loop over 2x2 blocks. The constants come from lipsync.yuv, as arguments
+# ms for one int64 loop over 2x2 blocks. The constants come from lipsync.encode.yuv, as arguments
 # (the compiled kernel takes them the same way: one source, and no import of yuv here).
 _I = np.int32
 

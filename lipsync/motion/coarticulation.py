@@ -1,6 +1,6 @@
 """Coarticulation: the ``dominance`` timing model (Cohen & Massaro's dominance functions).
 
-The rule-based sequencer (:mod:`lipsync.sequencer`) gives every sound its own shape, held
+The rule-based sequencer (:mod:`lipsync.motion.sequencer`) gives every sound its own shape, held
 around its middle, with short transitions centred on the boundaries. Real lips do not
 move like that (measured on GRID speaker s1, ``python -m lipsync.bench --only coarticulation``):
 they are always on their way somewhere, a vowel between two closures is less open than
@@ -42,7 +42,7 @@ and may be fitted again to one speaker (:func:`fit`) and stored in the speaker's
 
 Examples
 --------
->>> from lipsync.timeline import Segment, Timeline
+>>> from lipsync.motion.timeline import Segment, Timeline
 >>> tl = Timeline((Segment(0, 0.4, "X"), Segment(0.4, 0.5, "A"), Segment(0.5, 0.9, "D"),
 ...                Segment(0.9, 1.3, "X")), kind="viseme")
 >>> specs = dominance_sequence(tl, fps=25, rest="X", closures=["A"])
@@ -58,7 +58,7 @@ from typing import Dict, Iterable, List, Mapping, Optional, Sequence, Tuple
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
-from .errors import InputError
+from ..errors import InputError
 from .frames import FrameSpec, base_track, checked_frames
 from .timeline import VISEME, Timeline
 from .timing import DEFAULT_CURVE, check_timing, is_model
@@ -309,9 +309,9 @@ def resolve_timing(timing=None, bank=None):
     """The timing a render uses: the one asked for, else the bank's, else the default curve.
 
     ``timing`` None means "not chosen": the bank's ``timing:`` from bank.yaml if it has
-    one, else :data:`lipsync.timing.DEFAULT_CURVE`. The dominance model, however chosen,
+    one, else :data:`lipsync.motion.timing.DEFAULT_CURVE`. The dominance model, however chosen,
     takes the bank's fitted constants (``coarticulation:`` in bank.yaml) when it has them.
-    What comes back is what :func:`lipsync.sequencer.sequence` takes as ``timing``.
+    What comes back is what :func:`lipsync.motion.sequencer.sequence` takes as ``timing``.
 
     Examples
     --------
@@ -389,7 +389,7 @@ def viseme_classes(pmap, rest: Optional[str] = None) -> VisemeClasses:
 
     Examples
     --------
-    >>> from lipsync.phonemes import load_map
+    >>> from lipsync.phonetics.phonemes import load_map
     >>> c = viseme_classes(load_map("english-to-rhubarb"))
     >>> [c[v] for v in "ABCDEFGHX"], c.breath
     (['closure', 'other', 'open', 'open', 'rounded', 'rounded', 'labiodental', 'other', 'rest'], 'B')
@@ -433,7 +433,7 @@ def viseme_classes(pmap, rest: Optional[str] = None) -> VisemeClasses:
 
 
 #: The default map's (english-to-rhubarb) viseme classes, written out: the sequencer sits
-#: below the maps (lipsync.phonemes reads timelines), so it cannot load the map to learn
+#: below the maps (lipsync.phonetics.phonemes reads timelines), so it cannot load the map to learn
 #: them. tests/test_coarticulation.py checks this table against
 #: ``viseme_classes(load_map(DEFAULT_MAP))``.
 DEFAULT_MAP_CLASSES = {
@@ -473,7 +473,7 @@ def plan(visemes: Timeline, *, rest: str, closures: Iterable[str] = (), duration
 
     Examples
     --------
-    >>> from lipsync.timeline import Segment, Timeline
+    >>> from lipsync.motion.timeline import Segment, Timeline
     >>> plan(Timeline((Segment(0.1, 0.2, "A"), Segment(0.2, 0.21, "A")), kind="viseme"), rest="X", duration=0.3)
     [(0.0, 0.1, 'X'), (0.1, 0.21, 'A'), (0.21, 0.3, 'X')]
     """
@@ -653,7 +653,7 @@ def dominance_sequence(visemes: Timeline, *, fps: float, rest: str, closures: It
                        duration: Optional[float] = None) -> List[FrameSpec]:
     """One FrameSpec per output frame of a viseme timeline, by the dominance model.
 
-    What :func:`lipsync.sequencer.sequence` does with ``timing="dominance"``.
+    What :func:`lipsync.motion.sequencer.sequence` does with ``timing="dominance"``.
 
     Parameters
     ----------
@@ -679,7 +679,7 @@ def dominance_sequence(visemes: Timeline, *, fps: float, rest: str, closures: It
 
     Examples
     --------
-    >>> from lipsync.timeline import Segment, Timeline
+    >>> from lipsync.motion.timeline import Segment, Timeline
     >>> tl = Timeline((Segment(0, 0.3, "X"), Segment(0.3, 0.6, "D")), kind="viseme")
     >>> len(dominance_sequence(tl, fps=10, rest="X"))
     6

@@ -24,13 +24,13 @@ from typing import List, Optional, Tuple, Union
 
 import numpy as np
 
-from ..animator import Animator
-from ..bank import Bank
+from .animator import Animator
+from ..banks.bank import Bank
 from ..errors import InputError
-from ..frames import DEFAULT_FPS, frame_count
-from ..render import Renderer
-from ..sequencer import FrameSpec
-from .audio import BLOCK, RATE
+from ..motion.frames import DEFAULT_FPS, frame_count
+from ..morphing.render import Renderer
+from ..motion.sequencer import FrameSpec
+from ..live.audio import BLOCK, RATE
 
 PathLike = Union[str, "os.PathLike[str]"]
 
@@ -71,7 +71,7 @@ def live_specs(audio, bank, *, fps: float = DEFAULT_FPS, lookahead: Optional[flo
     """
     from tqdm import tqdm
 
-    from .animator import LiveAnimator
+    from ..live.animator import LiveAnimator
 
     pcm = _samples(audio)
     live = LiveAnimator(bank, fps=fps, map=map, timing=timing, prepare=False, audio_lookahead=lookahead)
@@ -103,7 +103,7 @@ def live_cues(specs: List[FrameSpec], fps: float) -> List[Tuple[float, float, st
 
 
 class LiveClip(Animator):
-    """An :class:`~lipsync.animator.Animator` whose frames are a live session's
+    """An :class:`~lipsync.pipeline.animator.Animator` whose frames are a live session's
     (:func:`live_specs`): what ``render_clip(..., live=...)`` renders."""
 
     def __init__(self, bank, audio, fps: float = DEFAULT_FPS, *, lookahead: Optional[float] = None, map=None,

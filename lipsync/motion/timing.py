@@ -35,8 +35,8 @@ from typing import Callable, List, Union
 
 import numpy as np
 
-from .errors import InputError, UnknownNameError
-from .registry import Registry
+from ..errors import InputError, UnknownNameError
+from ..registry import Registry
 
 ArrayLike = Union[float, np.ndarray]
 Curve = Callable[[ArrayLike], ArrayLike]
@@ -89,7 +89,7 @@ DEFAULT_CURVE = "sqrt-fast-middle"
 
 #: Timing models that are not a transition curve of the rule-based sequencer: each replaces
 #: the sequencer's transitions altogether (name -> what it is). ``dominance`` is the
-#: coarticulation model of :mod:`lipsync.coarticulation`: every sound pulls the mouth toward
+#: coarticulation model of :mod:`lipsync.motion.coarticulation`: every sound pulls the mouth toward
 #: its shape with a dominance that rises before it and decays after it (Cohen & Massaro).
 #: Wherever a timing is chosen (``--timing``, ``timing=``, bank.yaml's ``timing:``, a batch
 #: manifest) a curve name and a model name are equally valid: see :func:`timing_names`.
@@ -151,7 +151,7 @@ def get_curve(name_or_callable: Union[str, Curve]) -> Curve:
     if isinstance(name_or_callable, str):
         if name_or_callable not in CURVES and name_or_callable in MODELS:
             raise InputError(f"{name_or_callable!r} is a timing model, not a transition curve "
-                             f"(lipsync.sequencer.sequence takes either)")
+                             f"(lipsync.motion.sequencer.sequence takes either)")
         return CURVES.get(name_or_callable)
     if not callable(name_or_callable):
         raise InputError(f"a timing curve must be a name or a callable, not {name_or_callable!r}")

@@ -15,9 +15,9 @@ Storage, per entry (``<store>/flows/<key>.flow``, one flat file, memory-mapped w
 * values are float16 displacements: for ``|d| < 64`` px the rounding error is at most
   ``2**-11 * |d| <= 0.031`` px (``<= 0.004`` px for ``|d| < 8`` px), well under bilinear sampling's
   own error, at half the bytes of float32;
-* the **inverse maps** every frame needs (:func:`lipsync.flows.inverse_tables`): for each
+* the **inverse maps** every frame needs (:func:`lipsync.morphing.flows.inverse_tables`): for each
   side, the displacement ``X - Y`` with ``X + t F(X) = Y`` at ``t = k / TABLE_STEPS``, on
-  the coarse grid (every :data:`~lipsync.flows.SOLVE_STEP`-th pixel) of the box where
+  the coarse grid (every :data:`~lipsync.morphing.flows.SOLVE_STEP`-th pixel) of the box where
   either field moves, as int16 in 1/:data:`TABLE_SCALE` px (error <= 0.008 px, range
   +-512 px), left half only when the box is mirror-symmetric. The renderer reads them
   straight from the mapped file: a pair's first frame costs one checksum pass, no solve;
@@ -50,8 +50,8 @@ from typing import Callable, Dict, Iterator, List, Optional, Tuple
 
 import numpy as np
 
-from ._files import atomic_write_bytes, remove_dead_partials_in
-from .bank import Bank
+from .._files import atomic_write_bytes, remove_dead_partials_in
+from ..banks.bank import Bank
 
 #: Bump when the flow computation or the entry layout changes: old entries become misses.
 #: 4: flat memory-mapped entries with the inverse-map tables.
@@ -210,7 +210,7 @@ class FlowStore:
     Examples
     --------
     >>> import tempfile
-    >>> from lipsync.bank import Bank
+    >>> from lipsync.banks.bank import Bank
     >>> from lipsync._data import default_bank_dir
     >>> bank = Bank.load(default_bank_dir())
     >>> store = FlowStore(tempfile.mkdtemp())
@@ -261,7 +261,7 @@ class FlowStore:
             np.ascontiguousarray(bank.lines[a]).tobytes(), np.ascontiguousarray(bank.lines[b]).tobytes(),
             "\0".join(bank.line_names).encode(),
             json.dumps([w.a, w.b, w.p, bank.symmetry, axis]).encode(),
-            # refined flows (lipsync.refine) are other fields: their own keys, and a new
+            # refined flows (lipsync.morphing.refine) are other fields: their own keys, and a new
             # version of the refinement misses the old ones
             *([f"refine-v{REFINE_VERSION}".encode()] if bank.refine else []),
         ])

@@ -20,7 +20,7 @@ a few small passes, each with one rule):
    a segment of 200 ms or more therefore holds its viseme exactly for
    ``2 * HOLD_HALF_WIDTH_S`` around its midpoint, and every transition reaches its target
    no later than the target segment's midpoint;
-6. alpha inside a transition follows the timing curve (:mod:`lipsync.timing`);
+6. alpha inside a transition follows the timing curve (:mod:`lipsync.motion.timing`);
 7. a closure (e.g. the closed-lips viseme for P, B, M) that no frame shows exactly gets the
    frame nearest its midpoint forced to it, so lips always close fully even when the
    closure is shorter than a frame.
@@ -29,7 +29,7 @@ The rules, as data with the reason for each, are in :data:`RULES`.
 
 Examples
 --------
->>> from lipsync.timeline import Segment, Timeline
+>>> from lipsync.motion.timeline import Segment, Timeline
 >>> tl = Timeline((Segment(0, 0.4, "X"), Segment(0.4, 0.8, "A"), Segment(0.8, 1.2, "X")), kind="viseme")
 >>> frames = sequence(tl, fps=10, rest="X")
 >>> len(frames), frames[0], frames[6]
@@ -45,8 +45,8 @@ import numpy as np
 
 from .coarticulation import as_params, dominance_sequence
 # FrameSpec and the frame arithmetic live below both timing models; imported here as they
-# always were (lipsync.sequencer.FrameSpec etc.).
-from .frames import FPS_RANGE, MAX_FRAMES, FrameSpec, base_track, check_fps, checked_frames, frame_count, merge  # noqa: F401
+# always were (lipsync.motion.sequencer.FrameSpec etc.).
+from .frames import FPS_RANGE, MAX_FRAMES, FrameSpec, base_track, check_fps, checked_frames, frame_count, merge  # noqa: F401  # noqa: F401
 from .timeline import Segment, Timeline
 from .timing import DEFAULT_CURVE, Curve, get_curve, is_model
 
@@ -110,7 +110,7 @@ def plan_segments(visemes: Timeline, *, rest: str, closures: Iterable[str] = (),
 
     Examples
     --------
-    >>> from lipsync.timeline import Segment, Timeline
+    >>> from lipsync.motion.timeline import Segment, Timeline
     >>> tl = Timeline((Segment(0.2, 0.5, "A"), Segment(0.6, 0.9, "D")), kind="viseme")
     >>> plan_segments(tl, rest="X", duration=1.0)
     [(0.0, 0.2, 'X'), (0.2, 0.6, 'A'), (0.6, 0.9, 'D'), (0.9, 1.0, 'X')]
@@ -188,16 +188,16 @@ def sequence(visemes: Timeline, *, fps: float, rest: str, timing: Union[str, Cur
     ----------
     visemes : Timeline
         A timeline of kind "viseme" (map phoneme timelines first with
-        :func:`lipsync.phonemes.map_timeline`). Gaps are silence.
+        :func:`lipsync.phonetics.phonemes.map_timeline`). Gaps are silence.
     fps : float
         Output frame rate, 1 to 120. Frame n shows time n / fps.
     rest : str
         The viseme for silence (the bank's rest viseme).
     timing : str, callable or DominanceParams
-        Timing curve name from ``lipsync.timing.CURVES`` or a callable on [0, 1] (rules 5-7
+        Timing curve name from ``lipsync.motion.timing.CURVES`` or a callable on [0, 1] (rules 5-7
         with that curve); or ``"dominance"`` (or fitted
-        :class:`~lipsync.coarticulation.DominanceParams`): the coarticulation model of
-        :mod:`lipsync.coarticulation` instead of rules 3-7.
+        :class:`~lipsync.motion.coarticulation.DominanceParams`): the coarticulation model of
+        :mod:`lipsync.motion.coarticulation` instead of rules 3-7.
     closures : iterable of str
         Visemes that must be shown fully even when short (the closed-lips viseme).
     duration : float, optional
@@ -206,7 +206,7 @@ def sequence(visemes: Timeline, *, fps: float, rest: str, timing: Union[str, Cur
         The rule constants (seconds), overridable for experiments.
     classes : mapping, optional
         For the dominance model: viseme -> class, and the viseme of the breath before speech
-        (:func:`lipsync.coarticulation.viseme_classes` of the map; without it, no breath).
+        (:func:`lipsync.motion.coarticulation.viseme_classes` of the map; without it, no breath).
 
     Returns
     -------
@@ -215,7 +215,7 @@ def sequence(visemes: Timeline, *, fps: float, rest: str, timing: Union[str, Cur
 
     Examples
     --------
-    >>> from lipsync.timeline import Segment, Timeline
+    >>> from lipsync.motion.timeline import Segment, Timeline
     >>> tl = Timeline((Segment(0, 0.3, "X"), Segment(0.3, 0.6, "D")), kind="viseme")
     >>> [f.shown or "~" for f in sequence(tl, fps=10, rest="X")]
     ['X', 'X', 'X', '~', 'D', 'D']

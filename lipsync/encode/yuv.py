@@ -4,7 +4,7 @@ r"""RGB frames to planar YUV 4:2:0 (BT.709, limited range), the pixel format H.2
 ffmpeg instead of ``rgb24``: half the bytes through the pipe, and no swscale pass inside
 ffmpeg. swscale's exact path for this conversion (``accurate_rnd+full_chroma_int``, the
 only one that rounds correctly) cost 2.4 CPU-ms per 1280x720 frame (1.6 CPU-s of a 26.7 s
-clip); this fused pass runs in the compiled extension (lipsync._flowkernel; numba's copy
+clip); this fused pass runs in the compiled extension (lipsync.morphing._flowkernel; numba's copy
 of it when that is not built) on the caller's thread, outside the GIL. On the benchmark
 clips 99 % of its output bytes equal swscale's; the rest differ by 1-5 levels in chroma at
 sharp colour edges, where swscale filters over more than the 2x2 block.
@@ -31,8 +31,8 @@ from typing import Optional
 
 import numpy as np
 
-try:  # the compiled conversion; numba's copy (lipsync._numba_kernels) when it is not built
-    from . import _flowkernel as _compiled
+try:  # the compiled conversion; numba's copy (lipsync.morphing._numba_kernels) when it is not built
+    from ..morphing import _flowkernel as _compiled
 except ImportError:  # pragma: no cover - depends on the install
     _compiled = None
 
@@ -108,7 +108,7 @@ def rgb_to_yuv420p(rgb: np.ndarray, out: Optional[np.ndarray] = None) -> np.ndar
     if _compiled is not None:
         _compiled.rgb_to_yuv420p(rgb, out, w, h, _COEFFICIENTS, _YHALF, _CHALF, _SHIFT)
     else:  # pragma: no cover - depends on the install
-        from ._numba_kernels import rgb_to_yuv420p as convert
+        from ..morphing._numba_kernels import rgb_to_yuv420p as convert
 
         convert(rgb, out, *_NUMBA_CONSTANTS)
     return out

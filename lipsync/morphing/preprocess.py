@@ -1,11 +1,11 @@
 """Batch preprocessing: compute every missing pair flow of a bank into its flow store.
 
 Each entry holds both flows and their inverse maps at t = k/4 (Newton's method, see
-:func:`lipsync.flows.inverse_tables`), so rendering a frame never solves anything.
+:func:`lipsync.morphing.flows.inverse_tables`), so rendering a frame never solves anything.
 
 Pairs are independent, so they are computed in parallel by threads of the calling process
 (one pair per task). The work runs outside the GIL: the Beier-Neely field in a numba
-``nogil`` kernel (lipsync.warp), the inverse tables in OpenCV's remap and large numpy
+``nogil`` kernel (lipsync.morphing.warp), the inverse tables in OpenCV's remap and large numpy
 operations, the entry's CRC in zlib and its write in the OS. Threads, not worker processes:
 a library must work from any script, notebook or REPL, and a ``spawn`` process pool
 re-imports the caller's main module in every child, so a plain script without
@@ -27,7 +27,7 @@ from typing import List, Optional, Tuple
 
 import numpy as np
 
-from .bank import Bank
+from ..banks.bank import Bank
 from .flows import pair_flows
 from .normalise import NormalisedBank, normalise
 from .store import FlowStore
@@ -79,8 +79,8 @@ def all_pairs(names) -> List[Tuple[str, str]]:
 def bank_pair_flows(nb: NormalisedBank, a: str, b: str) -> Tuple[np.ndarray, np.ndarray, Optional[float]]:
     """What a bank's store entry for the pair (a, b) holds: ``(forward, backward, axis)``.
 
-    The line flows of :func:`lipsync.flows.pair_flows` on the normalised bank ``nb``, refined by optical
-    flow (:func:`lipsync.refine.refine_pair`) unless the bank says ``refine: false``, and
+    The line flows of :func:`lipsync.morphing.flows.pair_flows` on the normalised bank ``nb``, refined by optical
+    flow (:func:`lipsync.morphing.refine.refine_pair`) unless the bank says ``refine: false``, and
     the mirror axis to store them with (the bank's; refined flows of a symmetric bank are
     made symmetric too). Every place that computes store entries (preprocess, the renderer
     on a miss, the editor, batch workers) calls this.

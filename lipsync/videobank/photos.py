@@ -50,11 +50,11 @@ from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
-from ..bank import Bank, Feature, _read_image
+from ..banks.bank import Bank, Feature, _read_image
 from ..errors import InputError
 from ..registry import Registry
-from .names import IMAGE_SUFFIXES, REST, SYSTEMS, name_images
-from .yamlio import dump_bank, write_bank_text
+from ..banks.names import IMAGE_SUFFIXES, REST, SYSTEMS, name_images
+from ..banks.yamlio import dump_bank, write_bank_text
 
 #: Template banks by name; ``--template`` also takes a bank folder.
 TEMPLATES: Registry = Registry("template")
@@ -370,7 +370,7 @@ class FacePlacement:
     Attributes
     ----------
     features : dict
-        Viseme → {feature name → :class:`~lipsync.bank.Feature`}, the same names on every viseme.
+        Viseme → {feature name → :class:`~lipsync.banks.bank.Feature`}, the same names on every viseme.
     sources : dict
         Viseme → ``"face"``, or ``"face of <donor> (no face found in <image>)"``.
     symmetric : bool

@@ -25,16 +25,16 @@ from typing import Iterator, List, Optional, Union
 
 import numpy as np
 
-from .bank import Bank
-from .coarticulation import resolve_timing, viseme_classes
-from .errors import InputError
-from .phonemes import DEFAULT_MAP, PhonemeMap, bank_viseme_timeline, load_map
-from .readers import read_timeline
-from .render import Renderer
-from .frames import DEFAULT_FPS
-from .sequencer import FrameSpec, check_fps, sequence
-from .store import FlowStore
-from .timeline import Timeline
+from ..banks.bank import Bank
+from ..motion.coarticulation import resolve_timing, viseme_classes
+from ..errors import InputError
+from ..phonetics.phonemes import DEFAULT_MAP, PhonemeMap, bank_viseme_timeline, load_map
+from ..readers import read_timeline
+from ..morphing.render import Renderer
+from ..motion.frames import DEFAULT_FPS
+from ..motion.sequencer import FrameSpec, check_fps, sequence
+from ..morphing.store import FlowStore
+from ..motion.timeline import Timeline
 
 
 class Animator:
@@ -53,10 +53,10 @@ class Animator:
     method : str
         Renderer method: ``flow`` (default), ``splat``, ``beier-neely`` or ``dissolve``.
     timing : str, callable or DominanceParams, optional
-        How the mouth moves: a transition curve name (``lipsync.timing.CURVES``), a callable
-        curve, or ``"dominance"`` (coarticulation, :mod:`lipsync.coarticulation`). Default:
+        How the mouth moves: a transition curve name (``lipsync.motion.timing.CURVES``), a callable
+        curve, or ``"dominance"`` (coarticulation, :mod:`lipsync.motion.coarticulation`). Default:
         the bank's ``timing`` in bank.yaml, else the paper's text reading ``sqrt-fast-middle``
-        (:func:`lipsync.coarticulation.resolve_timing`).
+        (:func:`lipsync.motion.coarticulation.resolve_timing`).
     store : FlowStore, optional
         Flow store (default: the bank's). Missing flows are computed on first use.
     timeline_options : argparse.Namespace, optional
@@ -103,7 +103,7 @@ class Animator:
         """The bank's idle plate to composite onto, unless ``still`` (or the bank has none)."""
         self.plate = None
         if not still and self.bank.plate is not None and self.bank.channels == 3:
-            from .composite.plate import load_plate
+            from ..composite.plate import load_plate
 
             self.plate = load_plate(self.bank)
             self._mouth = threading.local()  # each render thread its own morphed frame
@@ -143,7 +143,7 @@ class Animator:
         """
         import warnings
 
-        from .speech.align import MissingWordsWarning, align
+        from ..speech.align import MissingWordsWarning, align
 
         with warnings.catch_warnings():
             # "lipsync" is not in CMUdict; the caller can read alignment.missing instead.
@@ -186,7 +186,7 @@ class Animator:
         Examples
         --------
         >>> from lipsync._data import default_bank_dir
-        >>> from lipsync.timeline import Segment, Timeline
+        >>> from lipsync.motion.timeline import Segment, Timeline
         >>> a = Animator(default_bank_dir(), Timeline((Segment(0.0, 0.4, "sil"),), kind="phoneme"), fps=25)
         >>> a.same_as_previous(0), a.same_as_previous(5)
         (False, True)
@@ -206,7 +206,7 @@ class Animator:
         Examples
         --------
         >>> from lipsync._data import default_bank_dir
-        >>> from lipsync.timeline import Segment, Timeline
+        >>> from lipsync.motion.timeline import Segment, Timeline
         >>> a = Animator(default_bank_dir(), Timeline((Segment(0.0, 0.4, "AA"),), kind="phoneme"), fps=25)
         >>> bool((a.frame_at(1e308) == a.frame(len(a) - 1)).all()), a.frame_at(-5.0).shape
         (True, (512, 512, 3))

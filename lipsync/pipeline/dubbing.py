@@ -33,8 +33,8 @@ from typing import List, Optional, Tuple
 
 import numpy as np
 
-from .errors import InputError, PathLike
-from .composite.plate import PlateCompositor, colour_lut, pingpong, plate_colour
+from ..errors import InputError, PathLike
+from ..composite.plate import PlateCompositor, colour_lut, pingpong, plate_colour
 
 __all__ = ["dub", "DubReport", "DubWarning", "cache_root", "lost_frames_text"]
 
@@ -95,7 +95,7 @@ class DubReport:
 
 def cache_root() -> Path:
     """Where dub caches live: ``$XDG_CACHE_HOME/lipsync/dub`` (``~/.cache/lipsync/dub``),
-    beside the flow stores of read-only banks (:meth:`lipsync.store.FlowStore.for_bank`)."""
+    beside the flow stores of read-only banks (:meth:`lipsync.morphing.store.FlowStore.for_bank`)."""
     base = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "lipsync"
     return base / "dub"
 
@@ -131,7 +131,7 @@ def lost_frames_text(lost, fps: float, limit: int = 8) -> str:
 # --------------------------------------------------------------------------- caches
 
 def _load_track(path: Path):
-    from .face.track import FaceTrack
+    from ..face.track import FaceTrack
 
     with np.load(path, allow_pickle=False) as z:
         points, found = z["points"], z["found"]
@@ -142,7 +142,7 @@ def _load_track(path: Path):
 
 
 def _save_track(path: Path, track) -> None:
-    from ._files import atomic_write_bytes
+    from .._files import atomic_write_bytes
 
     def write(f):
         np.savez(f, points=track.points, found=track.found, fps=np.float64(track.fps),
@@ -153,8 +153,8 @@ def _save_track(path: Path, track) -> None:
 
 def video_track(video: Path, info, *, entry: Optional[Path], quiet: bool, mesh=None):
     """The face track of every frame of ``video`` (from the cache entry when it loads)."""
-    from .face.track import track_frames
-    from .face.video import read_video
+    from ..face.track import track_frames
+    from ..face.video import read_video
     from tqdm import tqdm
 
     cached = entry / "track.npz" if entry is not None else None
@@ -166,7 +166,7 @@ def video_track(video: Path, info, *, entry: Optional[Path], quiet: bool, mesh=N
     with tqdm(total=info.frame_count or None, desc="face", unit="frame", disable=quiet, leave=False) as bar:
         with warnings.catch_warnings():
             # the lost frames are named once, by dub, in output frames
-            from .face.landmarks import FaceWarning
+            from ..face.landmarks import FaceWarning
 
             warnings.simplefilter("ignore", FaceWarning)
             track = track_frames(read_video(video, info=info), fps=info.fps, size=info.size, source=str(video),
@@ -184,8 +184,8 @@ def bank_from_video(video: Path, *, entry: Path, map=None, text: Optional[str] =
                     quiet: bool = True, track=None):
     """The bank ``lipsync init OUT --video VIDEO [--text TEXT]`` makes, cached in ``entry``
     (one per map and transcript)."""
-    from .bank import Bank
-    from .videobank import make_bank
+    from ..banks.bank import Bank
+    from ..videobank import make_bank
 
     key = hashlib.sha256(repr((os.fspath(map) if map is not None else None, text)).encode()).hexdigest()[:12]
     folder = entry / f"bank-{key}"
@@ -199,7 +199,7 @@ def bank_from_video(video: Path, *, entry: Path, map=None, text: Optional[str] =
     # Made under this process's own name, then renamed into place: two dubs of one video at
     # once (a batch) must not replace a bank the other is reading. The first rename wins; a
     # partial of a killed process is removed by the next dub (the render partials' rule).
-    from ._files import partial_name, remove_stale_partials
+    from .._files import partial_name, remove_stale_partials
 
     remove_stale_partials(folder)
     mine = folder.parent / partial_name(folder)
@@ -218,10 +218,10 @@ def bank_face(bank, *, mesh=None):
     """The lower-face mask of a bank of a real face (float32, bank pixels: the union over its
     visemes' face lines, :func:`lipsync.composite.face.mask_from_lines`) and the rest
     picture's face mesh (``(468, 3)``, what each video frame's pose is fitted to)."""
-    from .face.track import Tracker
-    from .composite.face import mask_from_lines
+    from ..face.track import Tracker
+    from ..composite.face import mask_from_lines
 
-    from .face.landmarks import FaceMesh
+    from ..face.landmarks import FaceMesh
 
     pts = Tracker(mesh or FaceMesh(), source=f"{bank.path} {bank.rest}").step(
         np.ascontiguousarray(bank.images[bank.rest][..., :3]))
@@ -231,7 +231,7 @@ def bank_face(bank, *, mesh=None):
     try:
         mask = mask_from_lines([bank.features[v] for v in bank.names], bank.shape)
     except (KeyError, ValueError):
-        from .composite.face import mask_from_mesh
+        from ..composite.face import mask_from_mesh
 
         mask = mask_from_mesh([pts], bank.shape)  # a bank whose lines are not a face template's
     return mask, pts
@@ -240,7 +240,7 @@ def bank_face(bank, *, mesh=None):
 def plate_poses(bank_mesh: np.ndarray, track) -> np.ndarray:
     """2x3 matrices ``(N, 2, 3)`` taking bank pixels to each video frame's pixels
     (:func:`lipsync.composite.face.pose_onto`; NaN where the face was lost)."""
-    from .composite.face import pose_onto
+    from ..composite.face import pose_onto
 
     out = np.full((len(track), 2, 3), np.nan)
     for i in np.nonzero(track.found)[0]:
@@ -252,8 +252,8 @@ def colour_table(bank, video: Path, track, poses: np.ndarray, bank_mesh: np.ndar
     """The colour table (or None: the colours agree) taking the bank's rest picture to the
     video's colour (:func:`~lipsync.composite.plate.plate_colour` over frames spread through
     the video)."""
-    from .videobank.cut import grab_frames
-    from .composite.plate import COLOUR_SAMPLES
+    from ..videobank.cut import grab_frames
+    from ..composite.plate import COLOUR_SAMPLES
 
     found = np.nonzero(track.found)[0]
     frames = sorted({int(found[int(k)]) for k in np.linspace(0, found.size - 1, min(COLOUR_SAMPLES, found.size))})
@@ -270,7 +270,7 @@ class _PlateReader:
     temporary file only when the speech outlasts the video (played backwards)."""
 
     def __init__(self, video: Path, info, *, keep: bool, output: Path):
-        from .face.video import read_video
+        from ..face.video import read_video
 
         self._gen = read_video(video, info=info)
         self._lock = threading.Lock()
@@ -284,7 +284,7 @@ class _PlateReader:
 
     def _grow_store(self, n: int):
         if self._store is None:
-            from ._files import partial_name
+            from .._files import partial_name
 
             # beside the output, named as its partials are: a killed run's is removed by the
             # next write of the output (lipsync._files.remove_stale_partials)
@@ -349,7 +349,7 @@ def dub(video: PathLike, audio: PathLike, output: PathLike, *, text: Optional[st
     map, timing
         As for :class:`lipsync.Animator` (the bank's timing by default).
     crf, preset
-        x264 quality and preset (default: :data:`lipsync.clip.DEFAULT_PRESET`).
+        x264 quality and preset (default: :data:`lipsync.pipeline.clip.DEFAULT_PRESET`).
     store : FlowStore or path-like, optional
         Flow store (default: the bank's own).
     jobs : int, optional
@@ -387,14 +387,14 @@ def dub(video: PathLike, audio: PathLike, output: PathLike, *, text: Optional[st
     from tqdm import tqdm
 
     from .animator import Animator
-    from .bank import Bank
+    from ..banks.bank import Bank
     from .clip import DEFAULT_PRESET, SINGLE_ENCODER_THREAD_CORES, render_parallel
-    from .encode import format_for, open_writer
-    from .encode.mp4 import check_preset
-    from .face.landmarks import FaceMesh
-    from .face.video import probe_video
-    from .speech.audio import load_audio
-    from .store import FlowStore
+    from ..encode import format_for, open_writer
+    from ..encode.mp4 import check_preset
+    from ..face.landmarks import FaceMesh
+    from ..face.video import probe_video
+    from ..speech.audio import load_audio
+    from ..morphing.store import FlowStore
 
     seconds = {}
     t = time.perf_counter()
@@ -440,7 +440,7 @@ def dub(video: PathLike, audio: PathLike, output: PathLike, *, text: Optional[st
     n = len(anim)
     if n == 0:
         raise InputError("the speech lasts 0 s: there is no frame to write", path=audio)
-    from .preprocess import all_pairs, preprocess
+    from ..morphing.preprocess import all_pairs, preprocess
 
     nb = anim.renderer.nb
     if any(not store.pair_path(store.pair_key(bank, a, b, nb.axis)).exists() for a, b in all_pairs(bank.names)):

@@ -10,7 +10,7 @@ The stages in order (DESIGN.md), shared by ``lipsync render``, ``lipsync batch``
 Examples
 --------
 >>> import os, tempfile
->>> from lipsync.clip import render_clip
+>>> from lipsync.pipeline.clip import render_clip
 >>> d = tempfile.mkdtemp()
 >>> tl = os.path.join(d, "a.tsv")
 >>> _ = open(tl, "w").write("0.00\tX\n0.20\tD\n0.60\tX\n")
@@ -26,7 +26,7 @@ import time
 from dataclasses import dataclass
 from typing import Optional, Union
 
-from .frames import DEFAULT_FPS  # noqa: F401  (the one default frame rate; clip.DEFAULT_FPS kept)
+from ..motion.frames import DEFAULT_FPS  # noqa: F401  (the one default frame rate; clip.DEFAULT_FPS kept)  # noqa: F401  (the one default frame rate; clip.DEFAULT_FPS kept)
 
 PathLike = Union[str, "os.PathLike[str]"]
 
@@ -222,7 +222,7 @@ def render_clip(timeline, output: PathLike, *, bank=None, audio: Optional[PathLi
         :func:`lipsync.speech.align.align`. Overrides ``timeline_options.lang``.
     live : float or True, optional
         Render what a live session fed the audio in real time shows
-        (:func:`lipsync.live.offline.live_specs`; ``timeline`` must be audio): the audio
+        (:func:`lipsync.pipeline.liveclip.live_specs`; ``timeline`` must be audio): the audio
         look-ahead in seconds, or True for the default.
     still : bool
         Render the bank's still pictures even when it has an idle plate (bank.yaml
@@ -236,15 +236,15 @@ def render_clip(timeline, output: PathLike, *, bank=None, audio: Optional[PathLi
     """
     from tqdm import tqdm
 
-    from ._data import default_bank_dir
+    from .._data import default_bank_dir
     from .animator import Animator
-    from .bank import Bank
-    from .composite import Compositor
-    from .encode import ENCODERS, format_for, open_writer
-    from .encode.mp4 import check_preset
-    from .errors import InputError
-    from .preprocess import all_pairs, preprocess
-    from .store import FlowStore
+    from ..banks.bank import Bank
+    from ..composite import Compositor
+    from ..encode import ENCODERS, format_for, open_writer
+    from ..encode.mp4 import check_preset
+    from ..errors import InputError
+    from ..morphing.preprocess import all_pairs, preprocess
+    from ..morphing.store import FlowStore
 
     t0 = time.perf_counter()
     if lang is not None:
@@ -274,12 +274,12 @@ def render_clip(timeline, output: PathLike, *, bank=None, audio: Optional[PathLi
     if not isinstance(store, FlowStore):
         store = FlowStore.for_bank(bank, store)
     if audio is None and out_format != "png" and not hasattr(timeline, "segments"):
-        from .readers.audio import is_audio_input
+        from ..readers.audio import is_audio_input
 
         if is_audio_input(timeline, getattr(timeline_options, "timeline_format", None)):
             audio = timeline  # speech in: its own sound is the soundtrack
     if live is not None:
-        from .live.offline import LiveClip
+        from .liveclip import LiveClip
 
         anim = LiveClip(bank, timeline, fps=fps, lookahead=None if live is True else live, map=map,
                         method=method, timing=timing, store=store, quiet=quiet,
@@ -392,7 +392,7 @@ def write_video(frames, output: PathLike, *, fps: Optional[float] = None, audio:
     """
     import numpy as np
 
-    from .encode import format_for, has_alpha, open_writer
+    from ..encode import format_for, has_alpha, open_writer
 
     if hasattr(frames, "frames") and hasattr(frames, "specs"):  # an Animator
         fps = frames.fps if fps is None else fps
@@ -413,7 +413,7 @@ def write_video(frames, output: PathLike, *, fps: Optional[float] = None, audio:
     name = format or format_for(output)
     flatten = channels == 4 and not has_alpha(name)
     if flatten:
-        from .alpha import flatten as flatten_onto
+        from ..morphing.alpha import flatten as flatten_onto
 
     def frames_out():
         yield first
@@ -436,8 +436,8 @@ def load_background(spec: str):
     >>> load_background("#00ff00")
     (0, 255, 0)
     """
-    from .alpha import parse_colour
-    from .errors import InputError
+    from ..morphing.alpha import parse_colour
+    from ..errors import InputError
 
     colour = parse_colour(spec)
     if colour is not None:
@@ -447,7 +447,7 @@ def load_background(spec: str):
                          path=spec)
     from pathlib import Path
 
-    from .bank import read_image
+    from ..banks.bank import read_image
 
     return read_image(Path(spec))
 
@@ -468,8 +468,8 @@ def composite_from_options(bank_composite, *, over=None, at=None, scale: Optiona
     """
     from pathlib import Path
 
-    from .composite import Composite, check_placement, parse_at
-    from .errors import InputError
+    from ..composite import Composite, check_placement, parse_at
+    from ..errors import InputError
 
     if over is None and at is None and scale is None:
         return bank_composite
@@ -478,7 +478,7 @@ def composite_from_options(bank_composite, *, over=None, at=None, scale: Optiona
                          "(or a composite: block in bank.yaml)")
     xy = parse_at(at) if isinstance(at, str) else at
     if over is not None:
-        from .bank import read_image
+        from ..banks.bank import read_image
 
         path = Path(over)
         if not path.is_file():

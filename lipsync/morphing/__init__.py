@@ -1,0 +1,1 @@
+"""morphing room."""
