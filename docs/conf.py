@@ -47,7 +47,7 @@ numpydoc_xref_param_type = False
 numpydoc_validation_checks: set = set()
 autodoc_member_order = "bysource"
 autodoc_typehints = "none"   # the numpydoc sections say the types in words
-autodoc_default_options = {"members": False}
+autodoc_default_options = {}
 
 # Option names stay as typed (--lang, not an en dash).
 smartquotes = False

@@ -115,10 +115,16 @@ def module_page(module: str) -> str:
     ``lipsync.morphing.warp``): it is documented where it lives, under both names."""
     import importlib
 
-    real = importlib.import_module(f"lipsync.{module}").__name__
+    import lipsync
+
+    mod = importlib.import_module(f"lipsync.{module}")
+    real = mod.__name__
     moved = [] if real == f"lipsync.{module}" else [f"(`lipsync.{module}` is `{real}`.)", ""]
+    # names the top-level page documents (lipsync.Bank, ...) are not described twice
+    top = sorted(n for n in lipsync._EXPORTS if getattr(mod, n, None) is getattr(lipsync, n))
+    exclude = [f"   :exclude-members: {', '.join(top)}"] if top else []
     return "\n".join([f"# lipsync.{module}", ""] + moved + ["```{eval-rst}", f".. automodule:: {real}",
-                                                           "   :members:", "```", ""])
+                                                           "   :members:"] + exclude + ["```", ""])
 
 
 # --- benchmarks --------------------------------------------------------------------------------

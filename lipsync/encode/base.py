@@ -34,7 +34,7 @@ class EncodeError(RuntimeError):
     path : str
         The output that was being written (nothing is left there).
     stderr : str
-        The last :data:`STDERR_TAIL_CHARS` characters of ffmpeg's stderr.
+        The last :data:`~lipsync.encode.base.STDERR_TAIL_CHARS` characters of ffmpeg's stderr.
     returncode : int or None
         ffmpeg's exit status, when it had exited.
     """
