@@ -83,13 +83,58 @@ def check_transcript(text: str, lang: Optional[str] = None, *, path: Optional[st
 
 # --- IPA segments to en-us acoustic units and back -------------------------------------------
 
-def _units(phone: str) -> Tuple[str, ...]:
+#: Per language (espeak-ng's code, :func:`lipsync.phonetics.g2p.resolve`): IPA segments
+#: given other en-us acoustic units than their closest by features, with the reason. "SIL"
+#: is the en-us model's silence: the segment keeps its own time in the phones tier, the gap
+#: the silence leaves between the phones around it within its word (:func:`_in_ipa`).
+#:
+#: Arabic (``ar``), both rows measured together on ``python -m lipsync.bench --only
+#: languages`` (4 sentences, 24 lip closures), Arabic with the transcript: frame agreement
+#: with the truth's mouth shapes, bilabials shown closed:
+#:
+#: ================================= ===== ======
+#: ʔ, short a aligned as             frames closed
+#: ================================= ===== ======
+#: K, AA (the features' and round 4) 0.755 20/24
+#: SIL, AA                           0.760 19/24
+#: K, AE                             0.736 20/24
+#: SIL, AE                           0.767 19/24
+#: K, AH                             0.779 23/24
+#: SIL, AH (used)                    0.825 22/24
+#: SIL, AH and long aː as AH too     0.733 18/24
+#: ================================= ===== ======
+#:
+#: - short a as AH: Arabic's short a is a centralised vowel (near ɐ), unlike its long aː
+#:   (AA, as for every language): aligned as AA, the article's a after the glottal stop was
+#:   not heard as a vowel, and the aligner stretched the glottal stop over it and put the
+#:   article's l and the b or m after it (البحر, البارد, المباراة) up to 0.3 s late.
+#: - ʔ as silence: the glottal stop is a closure of the glottis, a short silence (espeak-ng
+#:   speaks 50 ms of it) with no burst; en-us K, its nearest by features, expects one.
+#:   Kept to Arabic: Japanese has the bench's only other ʔ (one), and as silence it cost
+#:   Japanese 0.789 -> 0.785.
+LANGUAGE_UNITS: Dict[str, Dict[str, Tuple[str, ...]]] = {
+    "ar": {"a": ("AH",), "ʔ": ("SIL",)},
+}
+
+
+def _units(phone: str, lang: str = "") -> Tuple[str, ...]:
     """The en-us ARPAbet acoustic units standing for one IPA segment: the closest by
     features (open a as AA, by sound: the phonetics room's overrides), an affricate or
-    diphthong English lacks as two or three."""
+    diphthong English lacks as two or three; ``lang``'s own rows first
+    (:data:`LANGUAGE_UNITS`)."""
     from ..phonetics import english_phones
 
+    own = LANGUAGE_UNITS.get(lang, {})
+    if phone in own:
+        return own[phone]
     return tuple(english_phones(phone)) or ("AH",)
+
+
+def _speech_units(units: Sequence[str]) -> int:
+    """How many of ``units`` the phone pass reports (it leaves out the silence within a word)."""
+    from .align import _NON_SPEECH_PHONES
+
+    return sum(u not in _NON_SPEECH_PHONES for u in units)
 
 
 def _ipa_of_unit(unit: str) -> str:
@@ -166,11 +211,11 @@ def align_language(pcm, text: Optional[str], lang: str, *, quiet: bool = True, p
     plans: Dict[str, Tuple[str, Tuple[str, ...], List[int]]] = {}
     names: List[str] = []
     for w in read:
-        per_phone = [_units(p) for p in w.phones]
+        per_phone = [_units(p, code) for p in w.phones]
         flat = tuple(u for us in per_phone for u in us)
         name = _name(w.text, flat)
         A._CUSTOM[name] = flat
-        plans[name] = (w.text, w.phones, [len(us) for us in per_phone])
+        plans[name] = (w.text, w.phones, [_speech_units(us) for us in per_phone])
         names.append(name)
 
     def shown(n: str) -> str:
@@ -234,7 +279,7 @@ def _in_ipa(al, plans, unread: Sequence[str]):
     """The alignment with the transcript's own words and their IPA phones (loop phones in IPA)."""
     from dataclasses import replace
 
-    from .align import _timeline
+    from .align import _NON_SPEECH_PHONES, _timeline
 
     phones = list(al.phones)
     out_words: List[Segment] = []
@@ -255,14 +300,24 @@ def _in_ipa(al, plans, unread: Sequence[str]):
         text, ipa, counts = plan
         out_words.append(Segment(w.start, w.end, text))
         if len(inside) == sum(counts):
-            k = 0
+            k, last, silent = 0, w.start, None
             for seg, n in zip(ipa, counts):
                 part = inside[k:k + n]
                 k += n
+                if n == 0:  # aligned as silence (LANGUAGE_UNITS): the gap it leaves is its time
+                    silent = seg
+                    continue
                 if part:
+                    if silent is not None and part[0].start - last > 1e-9:
+                        out_phones.append(Segment(last, part[0].start, silent))
+                    silent = None
                     out_phones.append(Segment(part[0].start, part[-1].end, seg))
+                    last = part[-1].end
+            if silent is not None and w.end - last > 1e-9:
+                out_phones.append(Segment(last, w.end, silent))
         else:  # the phone pass gave another count: each unit in IPA
-            out_phones += [Segment(p.start, p.end, _ipa_of_unit(p.label)) for p in inside]
+            out_phones += [Segment(p.start, p.end, _ipa_of_unit(p.label)) for p in inside
+                           if p.label not in _NON_SPEECH_PHONES]
     out_phones += [Segment(p.start, p.end, _ipa_of_unit(p.label)) for p in phones[i:]]
     path = al.words.path
     return replace(al, words=_timeline(out_words, al.duration, path), phones=_timeline(out_phones, al.duration, path),
