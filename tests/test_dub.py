@@ -308,3 +308,26 @@ def test_bank_yaml_switches_the_plate_off_and_a_missing_plate_file_is_named(bank
     (copy / "plate.json").unlink()
     with pytest.raises(BankError, match="plate poses: file 'plate.json' not found"):
         Bank.load(copy)
+
+
+def test_dub_takes_lang_and_refuses_an_unknown_one(tmp_path, monkeypatch):
+    # --lang reaches the aligner of the new speech (and the cache key of a bank made from the
+    # video); an unknown code stops before any work, naming the codes
+    from lipsync.cli import main
+    from lipsync.pipeline import animator
+
+    seen = {}
+
+    def fake_align(audio, text=None, *, lang=None, **kw):
+        seen["lang"] = lang
+        raise SystemExit(0)
+
+    monkeypatch.setattr("lipsync.speech.align.align", fake_align)
+    with pytest.raises(SystemExit):
+        animator.Animator.from_audio("toon", str(Path(__file__).parents[1] / "samples" / "hello.wav"), "hello", lang="fr")
+    assert seen == {"lang": "fr"}
+    with pytest.raises(SystemExit) as stop:  # argparse refuses it: exit 2 with the list of codes
+        main(["dub", str(GRID / "bbwm5s.mpg"), "--audio", str(Path(__file__).parents[1] / "samples" / "hello.wav"),
+              "--lang", "xx-nowhere", "-o", str(tmp_path / "out.mp4"), "--quiet"])
+    assert stop.value.code == 2
+    assert not (tmp_path / "out.mp4").exists()

@@ -6,7 +6,7 @@ import argparse
 import sys
 
 from ..pipeline.clip import DEFAULT_CRF, DEFAULT_PRESET
-from ._common import TIMING_HELP, add_jobs_option, add_quiet_option, add_store_option
+from ._common import TIMING_HELP, add_jobs_option, add_lang_option, add_quiet_option, add_store_option
 
 
 def add_parser(sub) -> None:
@@ -41,6 +41,7 @@ def add_parser(sub) -> None:
                         f"(default: {DEFAULT_PRESET})")
     p.add_argument("--cache", default=None, metavar="DIR",
                    help="cache of face tracks and banks made from videos (default: ~/.cache/lipsync/dub)")
+    add_lang_option(p)
     add_store_option(p)
     add_jobs_option(p)
     add_quiet_option(p)
@@ -57,7 +58,7 @@ def run(args: argparse.Namespace) -> int:
     out = args.output or os.path.splitext(args.video)[0] + "-dub.mp4"
     report = dub(args.video, args.audio, out, text=args.text, bank=args.bank, video_text=args.video_text,
                  map=args.map, timing=args.timing, crf=args.crf, preset=args.preset, store=args.store,
-                 jobs=args.jobs, quiet=args.quiet, cache=args.cache)
+                 jobs=args.jobs, quiet=args.quiet, cache=args.cache, lang=args.lang)
     if not args.quiet:
         print(report.summary(), file=sys.stderr)
     return 0

@@ -110,7 +110,7 @@ class Animator:
 
     @classmethod
     def from_audio(cls, bank: Union[Bank, str, "os.PathLike[str]"], audio, text: Optional[str] = None,
-                   fps: float = DEFAULT_FPS, **kwargs) -> "Animator":
+                   fps: float = DEFAULT_FPS, *, lang: Optional[str] = None, **kwargs) -> "Animator":
         """An Animator for a speech recording: aligned with pocketsphinx, then as usual.
 
         Parameters
@@ -123,6 +123,8 @@ class Animator:
             The transcript, or a text file holding it; None: the words are recognised.
         fps : float
             Output frame rate.
+        lang : str, optional
+            The speech's language (BCP 47; default English): see :func:`lipsync.speech.align.align`.
         **kwargs
             ``map``, ``method``, ``timing``, ``store`` as for :class:`Animator`.
 
@@ -148,7 +150,7 @@ class Animator:
         with warnings.catch_warnings():
             # "lipsync" is not in CMUdict; the caller can read alignment.missing instead.
             warnings.simplefilter("ignore", MissingWordsWarning)
-            alignment = align(audio, text)
+            alignment = align(audio, text, lang=lang)
         anim = cls(bank, alignment.phones, fps=fps, **kwargs)
         anim.alignment = alignment
         return anim

@@ -181,13 +181,13 @@ def video_track(video: Path, info, *, entry: Optional[Path], quiet: bool, mesh=N
 
 
 def bank_from_video(video: Path, *, entry: Path, map=None, text: Optional[str] = None, jobs=None,
-                    quiet: bool = True, track=None):
+                    quiet: bool = True, track=None, lang: Optional[str] = None):
     """The bank ``lipsync init OUT --video VIDEO [--text TEXT]`` makes, cached in ``entry``
     (one per map and transcript)."""
     from ..banks.bank import Bank
     from ..videobank import make_bank
 
-    key = hashlib.sha256(repr((os.fspath(map) if map is not None else None, text)).encode()).hexdigest()[:12]
+    key = hashlib.sha256(repr((os.fspath(map) if map is not None else None, text, lang)).encode()).hexdigest()[:12]
     folder = entry / f"bank-{key}"
     if (folder / "bank.yaml").is_file():
         try:
@@ -196,6 +196,8 @@ def bank_from_video(video: Path, *, entry: Path, map=None, text: Optional[str] =
             shutil.rmtree(folder, ignore_errors=True)
     folder.parent.mkdir(parents=True, exist_ok=True)
     options = {"map": os.fspath(map)} if map is not None else {}
+    if lang is not None:
+        options["lang"] = lang
     # Made under this process's own name, then renamed into place: two dubs of one video at
     # once (a batch) must not replace a bank the other is reading. The first rename wins; a
     # partial of a killed process is removed by the next dub (the render partials' rule).
@@ -327,7 +329,8 @@ class _PlateReader:
 
 def dub(video: PathLike, audio: PathLike, output: PathLike, *, text: Optional[str] = None, bank=None,
         video_text: Optional[str] = None, map=None, timing=None, crf: int = 18, preset: Optional[str] = None,
-        store=None, jobs: Optional[int] = None, quiet: bool = False, cache: Optional[PathLike] = None) -> DubReport:
+        store=None, jobs: Optional[int] = None, quiet: bool = False, cache: Optional[PathLike] = None,
+        lang: Optional[str] = None) -> DubReport:
     """Re-voice ``video`` with the speech in ``audio`` (``lipsync dub``).
 
     Parameters
@@ -358,6 +361,9 @@ def dub(video: PathLike, audio: PathLike, output: PathLike, *, text: Optional[st
         No progress bars.
     cache : path-like, optional
         Cache folder (default :func:`cache_root`).
+    lang : str, optional
+        The language of the new speech and of VIDEO's (BCP 47; default English), as ``--lang``
+        (:func:`lipsync.speech.align.align`).
 
     Returns
     -------
@@ -422,7 +428,8 @@ def dub(video: PathLike, audio: PathLike, output: PathLike, *, text: Optional[st
 
     t = time.perf_counter()
     if bank is None:
-        bank = bank_from_video(video, entry=entry, map=map, text=video_text, jobs=jobs, quiet=quiet, track=track)
+        bank = bank_from_video(video, entry=entry, map=map, text=video_text, jobs=jobs, quiet=quiet, track=track,
+                               lang=lang)
     elif not isinstance(bank, Bank):
         bank = Bank.load(bank)
     seconds["bank"] = time.perf_counter() - t
@@ -436,7 +443,8 @@ def dub(video: PathLike, audio: PathLike, output: PathLike, *, text: Optional[st
     t = time.perf_counter()
     if not isinstance(store, FlowStore):
         store = FlowStore.for_bank(bank, store)
-    anim = Animator.from_audio(bank, audio, text, fps=info.fps, map=map, timing=timing, store=store, still=True)
+    anim = Animator.from_audio(bank, audio, text, fps=info.fps, lang=lang, map=map, timing=timing, store=store,
+                               still=True)
     n = len(anim)
     if n == 0:
         raise InputError("the speech lasts 0 s: there is no frame to write", path=audio)
