@@ -66,16 +66,8 @@ def browser(recording):
                          "--autoplay-policy=no-user-gesture-required"))
 
 
-@pytest.fixture(scope="module")
-def server():
-    from test_serve import Running
-
-    running = Running()
-    yield running
-    running.stop()
-
-
-STATUS = "return document.getElementById('status').textContent"
+# the live page's server fixture and status probe, shared with its browser test
+from test_serve_browser import STATUS, server  # noqa: E402,F401
 
 
 def _wait(driver, script, timeout=30.0):
