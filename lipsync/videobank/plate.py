@@ -53,6 +53,10 @@ VIDEO_NAME, POSES_NAME, MASK_NAME = "plate.mp4", "plate.json", "plate-mask.png"
 PLATE_SECONDS = 4.0
 #: Lengths tried, longest first, until one is idle (:data:`IDLE_SPREAD`).
 PLATE_LENGTHS = (PLATE_SECONDS, 3.0, 2.0, 1.5)
+#: Shorter lengths tried only when no window of PLATE_LENGTHS has the face in every frame
+#: (a face that leaves the picture every second, issue 38): a short plate is extended by
+#: joins (lipsync.composite.plate_time), and 0.5 s still holds a blink's whole 0.2-0.4 s.
+SHORT_LENGTHS = (1.0, 0.5)
 #: A stretch whose head wanders more than this (standard deviation of the still points'
 #: centre, eye distances) is not idle: the 2-D pose cannot follow a head that turns, and
 #: the pasted lower face then shows it (a webcam speaker looking down at a keyboard,
@@ -163,13 +167,13 @@ def choose_stretch(footage) -> Stretch:
         # wanders far is not idle, even if it moves slowly
         d = float(np.nanmedian(eye_distance(tr.points)))
         where = tr.points[:, list(T.STILL_POINTS), :2].mean(axis=1) / d * HEAD_WEIGHT
-        for seconds in PLATE_LENGTHS:
+        for seconds in PLATE_LENGTHS + SHORT_LENGTHS:
             length = min(n, int(round(seconds * tr.fps)))
             a, b = best_window(cost, length, where)
             if b == 0:
                 continue  # the face lost somewhere in every window: shorter
             spread = float(np.sqrt(np.nansum(np.nanvar(where[a:b] / HEAD_WEIGHT, axis=0))))
-            if spread <= IDLE_SPREAD or seconds == PLATE_LENGTHS[-1] or length == n:
+            if spread <= IDLE_SPREAD or seconds <= PLATE_LENGTHS[-1] or length == n:
                 break
         if b == 0:
             continue
@@ -180,8 +184,20 @@ def choose_stretch(footage) -> Stretch:
         if best is None or key < best[0]:
             best = (key, s)
     if best is None:
-        raise ValueError("no stretch of video with the face in every frame")
+        from ..errors import InputError
+
+        raise InputError(f"no {SHORT_LENGTHS[-1]:g} s of video with the face in every frame, for the idle plate "
+                         f"(the face leaves the picture, or is lost, too often: film it in view)",
+                         path=footage.names)
     return best[1]
+
+
+def _eyes(points: np.ndarray, found: np.ndarray) -> np.ndarray:
+    from ..face.measure import eye_opening
+
+    e = eye_opening(points)
+    e[~np.asarray(found, bool)] = np.nan
+    return e
 
 
 def stretch_poses(framing, reg, start: int, stop: int) -> Tuple[np.ndarray, np.ndarray]:
@@ -227,6 +243,10 @@ def write_plate(folder: Path, footage, framing, meshes, rest: str) -> str:
                       "lower_face_motion": round(s.motion, 5), "pose_residual": round(s.residual, 5),
                       "head_spread": round(s.spread, 5)},
            "poses": [[round(float(x), 5) for x in p.ravel()] for p in poses],
+           # each frame's eye opening (face mesh, lipsync.face.measure): where its blinks are, which
+           # the plate's timeline never joins into or out of (lipsync.composite.plate_time)
+           "eyes": [None if not np.isfinite(e) else round(float(e), 5)
+                    for e in _eyes(tr.points[s.start:s.stop], tr.found[s.start:s.stop])],
            # the rest picture's face mesh (bank pixels): the plate's colour is matched on its still skin
            "rest_mesh": [[round(float(x), 3) for x in p[:2]] for p in meshes[rest]]}
     (folder / POSES_NAME).write_text(json.dumps(doc) + "\n", encoding="utf-8")
