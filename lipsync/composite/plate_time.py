@@ -56,10 +56,11 @@ import numpy as np
 __all__ = ["PlateTimes", "PlateTimeline", "default_start", "blink_runs", "upper_face_features",
            "BLINK_BELOW", "REPEAT_GAP_S"]
 
-#: Eye opening below this share of the plate's median is a blink: the same rule the bank's
-#: picture choice uses (lipsync.videobank.select.BLINK_BELOW); GRID s1's blinks fall to
-#: 0.1-0.4 of the median, open eyes stay above 0.8.
-BLINK_BELOW = 0.6
+#: Eye opening below this share of the plate's median is a blink (or the lids lowered to
+#: read: as visible, and as bad to repeat). The face mesh never lets the lids meet: GRID
+#: s1's closed eyes (bbwm5s frames 8, 24-25, 37-45, checked by eye) measure 0.63-0.77 of the
+#: median, open ones 0.86-1.1.
+BLINK_BELOW = 0.8
 #: Frames either side of a blink that belong to it: the lids start to fall a frame or two
 #: before the opening drops below BLINK_BELOW and are still rising as long after (25 fps).
 BLINK_MARGIN = 2
@@ -76,16 +77,22 @@ MIN_JUMP_S = 0.4
 #: are chosen among (at random): one more ordinary step of the head and eyes is not seen as a
 #: cut, and always the same cheapest join would make a loop of its own.
 JOIN_SLACK = 1.0
-#: Cost added (median frame steps) to a join landing within MIN_JUMP_S of where a join
-#: landed in the last REPEAT_GAP_S: the same stretch again and again is the loop this
-#: module exists to avoid.
-LOOP_PENALTY = 1.5
+#: Cost added (median frame steps) to a join landing on a frame shown just now, falling
+#: linearly to 0 for one last shown REPEAT_GAP_S ago: the same stretch again and again is
+#: the loop this module exists to avoid, and footage not shown for a while (its blinks
+#: among it) comes back.
+LOOP_PENALTY = 3.0
+#: After this many seconds without a blink shown, joins landing just before a blink that may
+#: be shown again get a bonus, growing to BLINK_DUE_BONUS median steps over as long again.
+BLINK_DUE_S = 6.0
+BLINK_DUE_BONUS = 8.0
 #: Temperature of the random choice among cheap joins, in median frame steps (Schödl et
 #: al.'s sigma): cheaper joins are likelier, but not always the same one.
 JOIN_SIGMA = 0.5
-#: Longest plate for which all frame pairs are compared; a longer one keeps only each
-#: frame's :data:`NEIGHBOURS` cheapest joins, found block by block (memory O(N K)).
-NEIGHBOURS = 24
+#: Each frame keeps its this many cheapest joins (found block by block: memory O(N K)); a
+#: plate of at most this many frames keeps every join (a still stretch's frames are each
+#: other's nearest: a short list would never leave it).
+NEIGHBOURS = 1500
 _BLOCK = 1024
 
 
@@ -242,7 +249,6 @@ class PlateTimeline:
         if n and times.blink_of[pos] >= 0:
             pos = times.spans[times.blink_of[pos]][0]  # never start in the middle of a blink
         self._plan: List[int] = []
-        self._landed: List[Tuple[int, int]] = []  # (output step, frame) of recent joins
         self._state = _State(pos=pos, last={})
         self._rng = np.random.default_rng(int(pos) * 7919 + int(default_start(start) * 2 ** 31))
         self._lock = threading.Lock()
@@ -302,8 +308,34 @@ class PlateTimeline:
         self._plan.extend(range(st.pos, e + 1))
         st.last = self._blinks_in(st.pos, e, at, st.last)
         self.joins.append((len(self._plan), e, j, c))
-        self._landed.append((len(self._plan), j))
         st.pos = j
+
+    def _blink_due(self, pos: int, at: int, options, last: dict) -> np.ndarray:
+        """Per option, the bonus (median steps) for landing just before a blink that may be
+        shown again, once none has been shown for BLINK_DUE_S: it grows to BLINK_DUE_BONUS
+        over as long again (people blink every 2-10 s; a plate that never goes back to its
+        blinks stares)."""
+        t = self.times
+        if not t.spans:
+            return np.zeros(len(options))
+        since = (at - max(last.values())) if last else at
+        due = int(round(BLINK_DUE_S * t.fps))
+        if since <= due:
+            return np.zeros(len(options))
+        gain = BLINK_DUE_BONUS * min(1.0, (since - due) / max(due, 1))
+        out = np.zeros(len(options))
+        for k, (e, j, _) in enumerate(options):
+            ahead = [a for b, (a, z) in enumerate(t.spans) if j < a <= j + 2 * t.min_run
+                     and (b not in last or at + (e - pos) + 1 + (a - j) - last[b] >= t.repeat)]
+            out[k] = gain if ahead else 0.0
+        return out
+
+    def _last_shown(self, at: int) -> np.ndarray:
+        """Per plate frame, the output step it was last shown at (far past: never)."""
+        shown = np.full(self.times.n, -10 ** 9, np.int64)
+        recent = self._plan[-self.times.repeat:] if self.times.repeat else []
+        shown[np.asarray(recent, np.int64)] = np.arange(len(self._plan) - len(recent), len(self._plan))
+        return shown
 
     def _choose(self, pos: int, at: int, limit: int, last: dict, strict: bool):
         """``(exit frame, next frame, cost)`` of this run's join, or None."""
@@ -320,10 +352,11 @@ class PlateTimeline:
         if not options:
             return None
         costs = np.array([o[2] for o in options])
-        recent = [f for k, f in self._landed if at - k < t.repeat]
-        if recent:
-            lands = np.array([o[1] for o in options])[:, None]
-            costs = costs + LOOP_PENALTY * (np.abs(lands - np.array(recent)[None, :]) < t.min_jump).any(axis=1)
+        if self._plan:
+            shown = self._last_shown(at)
+            lands = np.array([o[1] for o in options])
+            costs = costs + LOOP_PENALTY * np.clip(1.0 - (at - shown[lands]) / max(t.repeat, 1), 0.0, 1.0)
+        costs = costs - self._blink_due(pos, at, options, last)
         runs = np.array([o[0] - pos + 1 for o in options], np.float64)
         cheap = costs <= float(costs.min()) + JOIN_SLACK
         w = np.where(cheap, np.exp(-(costs - costs.min()) / JOIN_SIGMA) * runs, 0.0)
