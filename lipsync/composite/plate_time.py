@@ -240,9 +240,12 @@ class PlateTimeline:
     start : float
         Where on the plate the clip begins, as a fraction ``[0, 1)`` of its length
         (:func:`default_start`); moved back to a blink's beginning if it falls in one.
+    straight : int
+        Frames the first run plays at least before its join (a dub plays its video through
+        before joining it to itself).
     """
 
-    def __init__(self, times: PlateTimes, start: float = 0.0):
+    def __init__(self, times: PlateTimes, start: float = 0.0, straight: int = 0):
         self.times = times
         n = times.n
         pos = int(np.floor((float(start) % 1.0) * n)) if n else 0
@@ -250,6 +253,7 @@ class PlateTimeline:
             pos = times.spans[times.blink_of[pos]][0]  # never start in the middle of a blink
         self._plan: List[int] = []
         self._state = _State(pos=pos, last={})
+        self._straight = int(straight)
         self._rng = np.random.default_rng(int(pos) * 7919 + int(default_start(start) * 2 ** 31))
         self._lock = threading.Lock()
         #: ``(step, from_frame, to_frame, cost)`` of every join made so far.
@@ -340,7 +344,7 @@ class PlateTimeline:
     def _choose(self, pos: int, at: int, limit: int, last: dict, strict: bool):
         """``(exit frame, next frame, cost)`` of this run's join, or None."""
         t = self.times
-        first = min(pos + t.min_run - 1, limit) if strict else pos
+        first = min(pos + max(t.min_run, self._straight if not self._plan else 0) - 1, limit) if strict else pos
         options = []
         for e in range(max(first, pos), limit + 1):
             seen = self._blinks_in(pos, e, at, last) if strict else {}

@@ -116,6 +116,8 @@ class Animator:
 
             self.plate = load_plate(self.bank)
             self._mouth = threading.local()  # each render thread its own morphed frame
+            if self.plate is None:  # switched off in bank.yaml
+                return
             if plate_start is None:
                 key = [(s.start, s.end, s.label) for s in self.visemes]
                 plate_start = default_start(key) * len(self.plate) / self.plate.fps

@@ -344,7 +344,7 @@ def _refuse_silence(samples: np.ndarray, audio: Path) -> None:
 
 def video_frames_for(track, n: int, start: float = 0.0) -> np.ndarray:
     """The video frame shown at each of ``n`` output frames: from ``start`` seconds on,
-    straight; when the video runs out, along a plate timeline
+    straight to (nearly) its end; then along a plate timeline
     (:class:`lipsync.composite.plate_time.PlateTimeline`) that joins it to itself where the
     face above the nose matches (face-mesh points, :func:`~lipsync.composite.plate_time.upper_face_features`)
     and never inside a blink (eye opening of the face mesh).
@@ -366,7 +366,8 @@ def video_frames_for(track, n: int, start: float = 0.0) -> np.ndarray:
     eyes = eye_opening(track.points)
     eyes[~np.asarray(track.found, bool)] = np.nan
     times = PlateTimes(upper_face_features(track.points, track.found), eyes, track.fps)
-    return PlateTimeline(times, start=first / nv).frames(n)
+    # the video played through first (joins only from its last MIN_RUN_S)
+    return PlateTimeline(times, start=first / nv, straight=nv - first - times.min_run).frames(n)
 
 
 # --------------------------------------------------------------------------- the pipeline
