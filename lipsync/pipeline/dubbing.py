@@ -182,6 +182,31 @@ def video_track(video: Path, info, *, entry: Optional[Path], quiet: bool, mesh=N
     return track
 
 
+def bank_key(map=None, text: Optional[str] = None, lang: Optional[str] = None) -> str:
+    """The cache name of a bank made from a video: its phoneme map, transcript and the
+    language of its speech (English and no language given are one).
+
+    Examples
+    --------
+    >>> bank_key(lang="es") == bank_key(lang="es"), bank_key(lang="es") == bank_key(), bank_key(lang="en") == bank_key()
+    (True, False, True)
+    """
+    from ..phonetics.g2p import is_english
+
+    lang = None if lang is None or is_english(lang) else lang
+    return hashlib.sha256(repr((os.fspath(map) if map is not None else None, text, lang)).encode()).hexdigest()[:12]
+
+
+def _align_speech(audio: Path, text: Optional[str], lang: Optional[str]):
+    """The new speech's words and phones (:func:`lipsync.speech.align.align`, as
+    :meth:`lipsync.Animator.from_audio` aligns them)."""
+    from ..speech.align import MissingWordsWarning, align
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", MissingWordsWarning)  # words spelt out: the alignment says so
+        return align(audio, text, lang=lang)
+
+
 def bank_from_video(video: Path, *, entry: Path, map=None, text: Optional[str] = None, jobs=None,
                     quiet: bool = True, track=None, lang: Optional[str] = None):
     """The bank ``lipsync init OUT --video VIDEO [--text TEXT] [--lang LANG]`` makes, cached
@@ -189,8 +214,7 @@ def bank_from_video(video: Path, *, entry: Path, map=None, text: Optional[str] =
     from ..banks.bank import Bank
     from ..videobank import make_bank
 
-    key = hashlib.sha256(repr((os.fspath(map) if map is not None else None, text, lang)).encode()).hexdigest()[:12]
-    folder = entry / f"bank-{key}"
+    folder = entry / f"bank-{bank_key(map, text, lang)}"
     if (folder / "bank.yaml").is_file():
         try:
             return Bank.load(folder)
@@ -483,6 +507,10 @@ def dub(video: PathLike, audio: PathLike, output: PathLike, *, text: Optional[st
     seconds["probe"] = time.perf_counter() - t
 
     t = time.perf_counter()
+    alignment = _align_speech(audio, text, lang)  # first: a transcript that does not fit stops before the long work
+    seconds["align"] = time.perf_counter() - t
+
+    t = time.perf_counter()
     mesh = FaceMesh()
     from ..videobank.sources import find_upright
 
@@ -507,8 +535,8 @@ def dub(video: PathLike, audio: PathLike, output: PathLike, *, text: Optional[st
     t = time.perf_counter()
     if not isinstance(store, FlowStore):
         store = FlowStore.for_bank(bank, store)
-    anim = Animator.from_audio(bank, audio, text, fps=info.fps, lang=lang, map=map, timing=timing, store=store,
-                               still=True)
+    anim = Animator(bank, alignment.phones, fps=info.fps, map=map, timing=timing, store=store, still=True)
+    anim.alignment = alignment
     n = len(anim)
     if n == 0:
         raise InputError("the speech lasts 0 s: there is no frame to write", path=audio)
@@ -517,7 +545,7 @@ def dub(video: PathLike, audio: PathLike, output: PathLike, *, text: Optional[st
     nb = anim.renderer.nb
     if any(not store.pair_path(store.pair_key(bank, a, b, nb.axis)).exists() for a, b in all_pairs(bank.names)):
         preprocess(bank, store=store, jobs=jobs, quiet=quiet, normalised=nb)
-    seconds["align"] = time.perf_counter() - t
+    seconds["align"] += time.perf_counter() - t
 
     t = time.perf_counter()
     nv = len(track)
