@@ -156,10 +156,30 @@ def _motion(ctx: Context, rows: List[dict]) -> None:
     anim = Animator(bank, Timeline((Segment(0.0, 20.0, "sil"),), kind="phoneme"), fps=25.0)
     played = grid.above_nose_changes([plate[anim.plate.index(i, 25.0, anim.plate_line)] for i in range(len(anim))],
                                      rows_plate)
-    rows.append({"figure": "plate_time_motion", "speaker (bank clips)": round(float(real.mean()), 2),
-                 "grid-s1 plate": round(float(steps.mean()), 2),
+    rows.append({"figure": "plate_time_motion", "which": "grid-s1 as shipped",
+                 "speaker (bank clips)": round(float(real.mean()), 2), "plate": round(float(steps.mean()), 2),
                  "plate / speaker": round(float(steps.mean() / real.mean()), 2),
-                 "plate as a 20 s render plays it": round(float(played.mean()), 2)})
+                 "as a 20 s render plays it": round(float(played.mean()), 2)})
+    # the same ten clips made into a bank by today's chooser (tools/make_grid_bank.py's input)
+    import json
+
+    from ..videobank import make_bank
+
+    videos = [grid.video(c) for c in grid.BANK_CLIPS]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        made = make_bank(ctx.tmp / "grid-remade", videos, texts={v: grid.transcript(v.stem) for v in videos},
+                         force=True, quiet=True, flows=False)
+    doc = json.loads((made.path / "plate.json").read_text())
+    plate = _frames(made.path / "plate.mp4")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        rows_plate = grid.above_nose_rows(track_frames(plate[:10], fps=25.0).points)
+    steps = grid.above_nose_changes(plate, rows_plate)
+    rows.append({"figure": "plate_time_motion", "which": f"remade today ({doc['source']['video']})",
+                 "speaker (bank clips)": round(float(real.mean()), 2), "plate": round(float(steps.mean()), 2),
+                 "plate / speaker": round(float(steps.mean() / real.mean()), 2),
+                 "mesh motion above the nose / footage's": doc["source"].get("motion_above_nose_vs_footage")})
 
 
 @FIGURES.decorator("plate_time")
