@@ -14,8 +14,8 @@ percentile of those: as closed as his lips are at nine in ten of his real closur
 
 Beside it, measured the same way in the same run: the real clips themselves (about 90 %
 by construction), an English dub of the same video (another GRID sentence's sound), and how
-often the Spanish dub's mouth is "closed" at its open vowels (a, e, o) by the same test (the
-measure's false alarms).
+often the Spanish dub's mouth is "closed" in the middle frame of its open vowels (a, e, o) by
+the same threshold (the measure's false alarms).
 """
 
 from __future__ import annotations
@@ -119,7 +119,8 @@ def translation_figures(ctx: Context, rows: List[dict]) -> None:
             phones = align(audio, text.read_text(encoding="utf-8"), lang="es").phones
         o = openings(out)
         closures = window_minima(o, phones, CLOSURES_ES, 25.0)
-        vowels = window_minima(o, phones, OPEN_ES, 25.0)
+        vowels = np.array([o[min(len(o) - 1, int(round((s.start + s.end) / 2 * 25.0)))]
+                           for s in phones if s.label in OPEN_ES])  # the vowel's middle frame
         row.update({"closures": len(closures), "closed %": round(100 * float(np.mean(closures <= threshold)), 1),
                     "open vowels called closed %": round(100 * float(np.mean(vowels <= threshold)), 1)})
     rows.append(row)

@@ -132,10 +132,13 @@ def _loudest_dbfs(path) -> float:
     return float(20 * np.log10(np.sqrt((x * x).mean(axis=1)).max() + 1e-12))
 
 
-#: Face-alone labels (:func:`from_face`): a speech frame's lip opening, as a share of the
-#: video's range (5th to 95th percentile), picks a sound standing for its shape; the map
-#: turns it into the bank's viseme as it does for aligned speech. Narrow lips (the mouth's
-#: width more than NARROW below its median, in eye distances) stand for a rounded vowel.
+#: Face-alone labels (:func:`from_face`): a speech frame's lip opening, as a share of its
+#: range over the speech's frames (5th to 95th percentile), picks a sound standing for its
+#: shape; the map turns it into the bank's viseme as it does for aligned speech. A frame
+#: where the lips are nearest (a local minimum of the opening) in the lower CLOSING_SHARE
+#: of the range is a closure: lips meet between syllables only for a moment, and the face
+#: mesh never puts them quite together. Narrow lips (the mouth's width more than NARROW
+#: below its median, in eye distances) stand for a rounded vowel.
 FACE_RULES = (
     # (opening at most, sound, why)
     (0.12, "P", "lips together: the closure every map has"),
@@ -143,10 +146,13 @@ FACE_RULES = (
     (0.75, "EH", "open, the jaw half down"),
     (9.99, "AA", "wide open"),
 )
+CLOSING_SHARE = 0.3
 #: Narrower than this (mouth width below its median, eye distances) and not closed: rounded.
 NARROW = 0.04
-#: Frames of sound this far below the loudest (dB) are pauses: the rest shape's candidates.
-PAUSE_BELOW_PEAK_DB = 30.0
+#: Frames of sound this far below the loudest (dB) are pauses: the rest shape's candidates
+#: (the aligner's own split of speech from breath and room noise,
+#: lipsync.speech.align.SPEECH_BELOW_PEAK_DB).
+PAUSE_BELOW_PEAK_DB = 25.0
 
 
 def from_face(speech: Speech, points, found, fps: float, pmap: PhonemeMap) -> Speech:
@@ -173,15 +179,19 @@ def from_face(speech: Speech, points, found, fps: float, pmap: PhonemeMap) -> Sp
     loud = db >= np.max(db) - PAUSE_BELOW_PEAK_DB
     ok = np.asarray(found, bool)
     opening, width = lip_opening(points), mouth_width(points)
-    lo, hi = np.nanpercentile(opening[ok], [5, 95]) if ok.any() else (0.0, 1.0)
+    talk = ok & loud
+    lo, hi = np.nanpercentile(opening[talk], [5, 95]) if talk.any() else (0.0, 1.0)
     share = (opening - lo) / max(hi - lo, 1e-6)
+    nearest = np.zeros(n, bool)  # the lips' local minima
+    nearest[1:-1] = (opening[1:-1] <= opening[:-2]) & (opening[1:-1] <= opening[2:])
     narrow = width < np.nanmedian(width[ok]) - NARROW if ok.any() else np.zeros(n, bool)
     labels = []
     for i in range(n):
         if not loud[i] or not ok[i]:
             labels.append("")
             continue
-        sound = next(p for top, p, _ in FACE_RULES if share[i] <= top)
+        sound = "P" if nearest[i] and share[i] <= CLOSING_SHARE else \
+            next(p for top, p, _ in FACE_RULES if share[i] <= top)
         labels.append("UW" if narrow[i] and sound != "P" else sound)
     segs, i = [], 0
     while i < n:
