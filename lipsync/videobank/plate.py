@@ -153,7 +153,8 @@ def upper_motion(points: np.ndarray) -> np.ndarray:
     ref = np.nanmedian(p, axis=0)
     above = np.nonzero(ref[:, 1] < ref[4, 1])[0]  # point 4: the nose tip
     out = np.zeros(len(p))
-    out[1:] = np.linalg.norm(np.diff(p[:, above], axis=0), axis=-1).mean(axis=-1) / eye_distance(p)[1:]
+    if above.size and len(p) > 1:
+        out[1:] = np.linalg.norm(np.diff(p[:, above], axis=0), axis=-1).mean(axis=-1) / eye_distance(p)[1:]
     return out
 
 
@@ -187,7 +188,9 @@ def choose_stretch(footage) -> Stretch:
     for u, tr in zip(ups, footage.tracks):
         u[~tr.found] = np.nan
         u[1:][~tr.found[:-1]] = np.nan  # a step from a frame without a face is no step
-    typical = float(np.nanmean(np.concatenate(ups)))  # the speaker's own motion above the nose
+    everything = np.concatenate(ups)
+    # the speaker's own motion above the nose
+    typical = float(np.nanmean(everything)) if np.isfinite(everything).any() else 0.0
     for v, (tr, reg) in enumerate(zip(footage.tracks, footage.regs)):
         n = len(tr)
         cost = lower_face_motion(tr.points) + HEAD_WEIGHT * head_motion(tr.points) + RESIDUAL_WEIGHT * reg.residual
