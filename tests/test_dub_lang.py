@@ -146,7 +146,9 @@ def test_a_sideways_video_is_turned_upright_as_init_does(spanish_dub, tmp_path, 
 def test_video_lang_reaches_the_bank_and_its_key():
     from lipsync.pipeline.dubbing import bank_key
 
-    assert bank_key(lang="fr") != bank_key() == bank_key(lang="en-US")
+    from lipsync.phonetics.phonemes import DEFAULT_MAP
+
+    assert bank_key(lang="fr") != bank_key() == bank_key(lang="en-US") == bank_key(DEFAULT_MAP)
     assert bank_key(text="a", lang="fr") != bank_key(text="b", lang="fr")
 
 

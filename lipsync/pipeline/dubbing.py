@@ -184,7 +184,8 @@ def video_track(video: Path, info, *, entry: Optional[Path], quiet: bool, mesh=N
 
 def bank_key(map=None, text: Optional[str] = None, lang: Optional[str] = None) -> str:
     """The cache name of a bank made from a video: its phoneme map, transcript and the
-    language of its speech (English and no language given are one).
+    language of its speech (English and no language given are one, as are the default map
+    and none given).
 
     Examples
     --------
@@ -192,8 +193,10 @@ def bank_key(map=None, text: Optional[str] = None, lang: Optional[str] = None) -
     (True, False, True)
     """
     from ..phonetics.g2p import is_english
+    from ..phonetics.phonemes import DEFAULT_MAP
 
     lang = None if lang is None or is_english(lang) else lang
+    map = DEFAULT_MAP if map is None else map  # the command line's default and the API's are one map
     return hashlib.sha256(repr((os.fspath(map) if map is not None else None, text, lang)).encode()).hexdigest()[:12]
 
 
