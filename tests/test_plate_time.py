@@ -141,3 +141,19 @@ def test_render_takes_plate_start_and_refuses_a_negative_one(tmp_path, capsys):
                  "-o", str(tmp_path / "o.mp4"), "-q"]) == 2
     assert "--plate-start must be a number of seconds" in capsys.readouterr().err
     assert not (tmp_path / "o.mp4").exists()
+
+
+def test_a_live_render_follows_a_plate_timeline_too(grid_bank):
+    # render --live (LiveClip) has no viseme timeline: its start comes from its frames
+    from pathlib import Path
+
+    from lipsync.pipeline.liveclip import LiveClip
+
+    wav = Path(__file__).parents[1] / "samples" / "hello.wav"
+    clip = LiveClip(grid_bank, wav, fps=25)
+    again = LiveClip(grid_bank, wav, fps=25)
+    assert clip.plate_line is not None and clip.plate_start == again.plate_start
+    top = min(clip.plate.compositor.roi(p, clip.plate.frames.shape[1:])[1] for p in clip.plate.poses)
+    for i in (0, 30, len(clip) - 1):
+        j = clip.plate.index(i, 25.0, clip.plate_line)
+        assert np.array_equal(clip.frame(i)[:top], clip.plate.frames[j][:top])

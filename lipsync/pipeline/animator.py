@@ -106,7 +106,7 @@ class Animator:
     def _attach_plate(self, still: bool, plate_start: Optional[float] = None) -> None:
         """The bank's idle plate to composite onto, unless ``still`` (or the bank has none),
         and this clip's way through it (:mod:`lipsync.composite.plate_time`): from
-        ``plate_start`` seconds, by default a place derived from the viseme timeline (the
+        ``plate_start`` seconds, by default a place derived from the frames' mouth shapes (the
         same clip the same frames; another sentence another place)."""
         self.plate = None
         self.plate_line = None
@@ -118,8 +118,8 @@ class Animator:
             self._mouth = threading.local()  # each render thread its own morphed frame
             if self.plate is None:  # switched off in bank.yaml
                 return
-            if plate_start is None:
-                key = [(s.start, s.end, s.label) for s in self.visemes]
+            if plate_start is None:  # the frames' own content (an Animator's or a LiveClip's specs)
+                key = [(s.from_viseme, s.to_viseme, round(float(s.alpha), 4)) for s in self.specs]
                 plate_start = default_start(key) * len(self.plate) / self.plate.fps
             #: Where on the plate this clip starts, seconds (``--plate-start``).
             self.plate_start = float(plate_start)
