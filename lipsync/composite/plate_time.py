@@ -49,7 +49,7 @@ from __future__ import annotations
 import hashlib
 import threading
 from dataclasses import dataclass
-from typing import List, Optional, Sequence, Tuple
+from typing import List, Optional, Tuple
 
 import numpy as np
 
@@ -367,7 +367,3 @@ class PlateTimeline:
         e, j, _ = options[int(self._rng.choice(len(options), p=w / w.sum()))]
         return e, j, float(next(o[2] for o in options if o[0] == e and o[1] == j))
 
-
-def plate_frames_straight(count: int, n: int, start: int = 0) -> np.ndarray:
-    """Frames ``start .. start+count-1`` (a plate at least as long as the output: no join)."""
-    return np.arange(start, start + count) % max(n, 1)
