@@ -16,10 +16,11 @@ loop, and an idle plate that moves as the speaker does (lipsync.composite.plate_
   (their sources within 3 frames); reported: blinks, copies closer than 4 s, the shortest gap
   between copies. Beside it the same count for ping-pong (the frame order every dub used
   before), over the same frames.
-* **plate motion**: the mean absolute grey step between consecutive frames above the nose
-  of grid-s1's idle plate (``plate.mp4``) against the real speaker's (the bank's source clips,
-  :data:`lipsync.bench.grid.BANK_CLIPS`, at their own size), and of the plate as a 20 s
-  render plays it.
+* **plate motion**: the mean absolute grey step between consecutive frames above the nose,
+  over the face's columns (:func:`face_steps`), of grid-s1's idle plate (``plate.mp4``)
+  against the real speaker's (the bank's source clips, :data:`lipsync.bench.grid.BANK_CLIPS`,
+  at their own size), of the plate as a 20 s render plays it, and of the plate today's
+  chooser makes from the same clips.
 """
 
 from __future__ import annotations
@@ -135,6 +136,17 @@ def _long_dub(ctx: Context, rows: List[dict]) -> None:
                  "blinks": len(pp_deep), "copies within 4 s": close, "closest copies (s)": shortest})
 
 
+def face_steps(frames, points) -> np.ndarray:
+    """:func:`lipsync.bench.grid.above_nose_changes` over the face's own columns (between the
+    face outline's ear-level points, median over the track): the background beside the head,
+    wide in the video and narrow in the bank's crop, would dilute one and not the other."""
+    from ..face import topology as T
+
+    p = np.nanmedian(np.asarray(points, np.float64)[..., :2], axis=0)
+    x0, x1 = max(0, int(p[T.JAW_L[0], 0])), int(p[T.JAW_R[0], 0]) + 1
+    return grid.above_nose_changes([f[:, x0:x1] for f in frames], points)
+
+
 def _motion(ctx: Context, rows: List[dict]) -> None:
     from .._data import shipped_banks
     from ..banks.bank import Bank
@@ -146,16 +158,12 @@ def _motion(ctx: Context, rows: List[dict]) -> None:
     plate = _frames(bank.plate.video)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        rows_plate = grid.above_nose_rows(track_frames(plate[:10], fps=25.0).points)
-    steps = grid.above_nose_changes(plate, rows_plate)
-    real = []
-    for c in grid.BANK_CLIPS:
-        f = _frames(grid.video(c))
-        real.append(grid.above_nose_changes(f, grid.track(c).points))
-    real = np.concatenate(real)
+        plate_points = track_frames(plate, fps=25.0).points
+    steps = face_steps(plate, plate_points)
+    real = np.concatenate([face_steps(_frames(grid.video(c)), grid.track(c).points) for c in grid.BANK_CLIPS])
     anim = Animator(bank, Timeline((Segment(0.0, 20.0, "sil"),), kind="phoneme"), fps=25.0)
-    played = grid.above_nose_changes([plate[anim.plate.index(i, 25.0, anim.plate_line)] for i in range(len(anim))],
-                                     rows_plate)
+    order = [anim.plate.index(i, 25.0, anim.plate_line) for i in range(len(anim))]
+    played = face_steps([plate[j] for j in order], plate_points[order])
     rows.append({"figure": "plate_time_motion", "which": "grid-s1 as shipped",
                  "speaker (bank clips)": round(float(real.mean()), 2), "plate": round(float(steps.mean()), 2),
                  "plate / speaker": round(float(steps.mean() / real.mean()), 2),
@@ -174,8 +182,7 @@ def _motion(ctx: Context, rows: List[dict]) -> None:
     plate = _frames(made.path / "plate.mp4")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        rows_plate = grid.above_nose_rows(track_frames(plate[:10], fps=25.0).points)
-    steps = grid.above_nose_changes(plate, rows_plate)
+        steps = face_steps(plate, track_frames(plate, fps=25.0).points)
     rows.append({"figure": "plate_time_motion", "which": f"remade today ({doc['source']['video']})",
                  "speaker (bank clips)": round(float(real.mean()), 2), "plate": round(float(steps.mean()), 2),
                  "plate / speaker": round(float(steps.mean() / real.mean()), 2),
