@@ -42,7 +42,7 @@ __all__ = ["dub", "DubReport", "DubWarning", "cache_root", "lost_frames_text"]
 
 #: Cache format: bump when what an entry holds changes (older entries are then misses).
 CACHE_VERSION = 2  # 2: the video turned upright before tracking; the bank's key has its language
-#: Decoded plate frames kept for playing the video backwards (speech longer than the
+#: Decoded plate frames kept for going back in the video (speech longer than the
 #: video) are held in a temporary file beside the output (``.OUT.partial-PID.plate-frames``)
 #: rather than in memory: a 30 s 720p video is 2 GB of RGB.
 _MEMMAP_SUFFIX = ".plate-frames"
@@ -298,7 +298,7 @@ def colour_table(bank, video: Path, track, poses: np.ndarray, bank_mesh: np.ndar
 
 class _PlateReader:
     """The video's frames by index for render threads: decoded once, in order; kept in a
-    temporary file only when the speech outlasts the video (played backwards)."""
+    temporary file only when the speech outlasts the video (joined to itself)."""
 
     def __init__(self, video: Path, info, *, keep: bool, output: Path):
         from ..face.video import read_video
