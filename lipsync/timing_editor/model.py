@@ -336,7 +336,7 @@ def load_doc(audio_duration: float, *, context: Context, timeline: Optional[str]
         words, phones = alignment.words, alignment.phones
         phones = phones.replace(segments=tuple(Segment(s.start, s.end, _strip_stress(s.label)) for s in phones))
     else:
-        words, phones = _read_file(timeline, tier)
+        words, phones = _read_file(timeline, tier, context.fps)
     words = snap_timeline(words, context, kind=PHONEME)
     if phones.kind == VISEME:
         visemes = _cover(snap_timeline(_bank_names(phones, context), context, kind=VISEME), context)
@@ -357,12 +357,13 @@ def _bank_names(visemes: Timeline, context: Context) -> Timeline:
     return tl
 
 
-def _read_file(path: str, tier: Optional[str]) -> Tuple[Timeline, Timeline]:
-    """(words, phones) of a timeline file; words empty where the format has none."""
+def _read_file(path: str, tier: Optional[str], fps: float) -> Tuple[Timeline, Timeline]:
+    """(words, phones) of a timeline file; words empty where the format has none. A Moho
+    file's frames are read at the editor's ``fps`` (the rate its saves write)."""
     from ..readers import READERS, read_timeline
     from ..readers.papagayo import read_words
 
-    phones = read_timeline(path, tier=tier)
+    phones = read_timeline(path, tier=tier, fps=fps)
     ext = os.path.splitext(path)[1].lower()
     words = Timeline(())
     if ext == ".pgo":
