@@ -33,7 +33,8 @@ bench: $(STAMP)
 test-browser: $(STAMP)
 	@if [ ! -x /usr/bin/chromium ] || [ ! -x /usr/bin/chromedriver ]; then \
 		apt-get update && apt-get install -y chromium chromium-driver; fi
-	$(BIN)/python -m pytest -q -s -p no:cacheprovider tests/test_browser_editor.py tests/test_serve_mic_browser.py
+	$(BIN)/python -m pytest -q -s -p no:cacheprovider tests/test_browser_editor.py tests/test_serve_mic_browser.py \
+		tests/test_timing_editor_browser.py
 
 # The Blender add-on in real headless Blender (also part of `make test` when blender is
 # present). Installs Debian's blender first, only if it is missing.

@@ -151,17 +151,17 @@ function pump() {
     S.inflight++; S.frameRequests++;
     api(frameUrl(i)).then((r) => (r.ok ? r.blob() : Promise.reject(new Error(`frame ${i}: HTTP ${r.status}`))))
       .then((blob) => {
-        if (version === S.version) { S.frames.set(key, URL.createObjectURL(blob)); showMouth(); }
+        if (version === S.version) { S.frames.set(key, { url: URL.createObjectURL(blob), blob }); showMouth(); }
       })
       .catch((e) => say(String(e.message || e), true))
       .finally(() => { S.inflight--; pump(); });
   }
 }
 function showMouth() {
-  const i = frameOf(S.cursor), url = S.frames.get(`${S.version}:${i}`);
-  if (url) {
+  const i = frameOf(S.cursor), got = S.frames.get(`${S.version}:${i}`);
+  if (got) {
     if (S.shownFrame !== i || S.shownVersion !== S.version) {
-      $("mouth").src = url; S.shownFrame = i; S.shownVersion = S.version;
+      $("mouth").src = got.url; S.shownFrame = i; S.shownVersion = S.version; S.shownBlob = got.blob;
       $("mouth").dataset.frame = i; $("mouth").dataset.version = S.version;
     }
   } else want(i);
@@ -169,7 +169,7 @@ function showMouth() {
 }
 function newVersion(doc) {
   S.doc = doc; S.version++;
-  for (const url of S.frames.values()) URL.revokeObjectURL(url);
+  for (const f of S.frames.values()) URL.revokeObjectURL(f.url);
   S.frames.clear(); S.wanted.clear(); S.shownFrame = -1;
   draw(); showMouth();
 }
