@@ -141,13 +141,15 @@ def test_drag_retype_save_preview(tmp_path, driver):
     for fmt in ("textgrid", "pgo"):
         assert TimingEditor(AUDIO, timeline=paths[fmt], fps=FPS, out=tmp_path / "x").get() == final, fmt
 
-    # lipsync render of the edited timeline (its viseme tier as saved), frame by frame as PNGs
-    frames = tmp_path / "frames"
-    r = subprocess.run([sys.executable, "-m", "lipsync", "render", paths["rhubarb-tsv"], "-o", f"{frames}/",
-                        "--fps", str(FPS), "--quiet"], capture_output=True, text=True, timeout=300)
-    assert r.returncode == 0, r.stderr
-    rendered = cv2.cvtColor(cv2.imread(str(sorted(frames.iterdir())[index])), cv2.COLOR_BGR2RGB)
-    np.testing.assert_array_equal(shown, rendered)
+    # lipsync render of the edited timeline as saved (the TextGrid's phones, and the viseme tier
+    # as Rhubarb cues), frame by frame as PNGs: the frame the page showed is render's
+    for fmt in ("textgrid", "rhubarb-tsv"):
+        frames = tmp_path / f"frames-{fmt}"
+        r = subprocess.run([sys.executable, "-m", "lipsync", "render", paths[fmt], "-o", f"{frames}/",
+                            "--fps", str(FPS), "--quiet"], capture_output=True, text=True, timeout=300)
+        assert r.returncode == 0, r.stderr
+        rendered = cv2.cvtColor(cv2.imread(str(sorted(frames.iterdir())[index])), cv2.COLOR_BGR2RGB)
+        np.testing.assert_array_equal(shown, rendered, err_msg=fmt)
     # and the moved boundary shows: the unedited timeline's frame there is another
     original = TimingEditor(AUDIO, timeline=ALIGN, fps=FPS, out=tmp_path / "y").frame(index / FPS)
     assert np.abs(original.astype(int) - rendered.astype(int)).max() > 40

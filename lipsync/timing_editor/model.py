@@ -3,9 +3,13 @@
 A :class:`TimingDoc` is what ``lipsync edit-timeline`` edits and what its API's JSON holds:
 three tiers of :class:`~lipsync.motion.timeline.Timeline` (words as written, phones without
 stress digits, the bank's visemes covering the whole recording) and the recording's duration.
-Every time is a whole frame at the editor's ``fps`` (``frame / fps``), as in Papagayo: what
-the page snaps to, what .pgo and Moho files hold, and what Rhubarb's two decimals hold
-exactly at 25, 50 or 100 fps, so a saved file reads back as exactly the edited timeline.
+Every word and phone time is a whole frame at the editor's ``fps`` (``frame / fps``), as in
+Papagayo: what the page snaps to and what .pgo files hold, so a saved file reads back as
+exactly the edited timeline. The viseme tier is what the phoneme map makes of the phones,
+exactly as ``lipsync render`` maps them (so the preview is render's frames): a diphthong's
+two visemes share its time and may meet half-way through a frame. Rhubarb's millisecond
+times hold that exactly at 25 or 50 fps; Moho's whole frames move such a split by half a
+frame (the only change a save-and-reopen makes, and only in Moho files).
 
 The stages used are the pipeline's own: :mod:`lipsync.readers` (any timeline file),
 :func:`lipsync.speech.align.align` (audio and a transcript), the phoneme map
@@ -19,8 +23,8 @@ Examples
 ...                            "phones": [{"start": 0.2, "end": 0.32, "label": "HH"},
 ...                                       {"start": 0.32, "end": 0.6, "label": "AY"}]},
 ...                           context=Context(duration=1.0, fps=25))
->>> [(s.label, s.start, s.end) for s in doc.visemes]
-[('X', 0.0, 0.2), ('C', 0.2, 0.32), ('D', 0.32, 0.48), ('B', 0.48, 0.6), ('X', 0.6, 1.0)]
+>>> [(s.label, round(s.start, 3), round(s.end, 3)) for s in doc.visemes]  # AY: D then B, half each
+[('X', 0.0, 0.2), ('C', 0.2, 0.32), ('D', 0.32, 0.46), ('B', 0.46, 0.6), ('X', 0.6, 1.0)]
 """
 
 from __future__ import annotations
@@ -81,9 +85,10 @@ class Context:
             object.__setattr__(self, "pmap", load_map(DEFAULT_MAP))
 
     @property
-    def frames(self) -> int:
-        """Frames of the recording (the last boundary a segment may have)."""
-        return max(1, int(math.floor(self.duration * self.fps + 0.5)))
+    def last_frame(self) -> int:
+        """The last whole frame inside the recording: the latest boundary on the grid (a
+        segment may also end at the recording's own end, :attr:`duration`)."""
+        return int(math.floor(self.duration * self.fps + 1e-9))
 
 
 @dataclass(frozen=True)
@@ -108,7 +113,8 @@ class TimingDoc:
 
     @classmethod
     def from_json(cls, obj, *, context: Context) -> "TimingDoc":
-        """Validate the API's JSON (InputError naming the tier and segment), snap it to frames.
+        """Validate the API's JSON (InputError naming the tier and segment), words and phones
+        snapped to frames.
 
         ``visemes`` may be left out or null: the viseme tier is then derived from the phones
         through the map. Empty labels are silence (left as gaps).
@@ -143,12 +149,13 @@ def _number(value, where: str) -> float:
 
 
 def _tier(rows, name: str, context: Context) -> Timeline:
-    """A JSON tier checked (order, overlap, bounds, labels) and snapped to the frame grid."""
+    """A JSON tier checked (order, overlap, bounds, labels); words and phones snapped to the
+    frame grid (the visemes are kept as given: the page snaps what it moves)."""
     if not isinstance(rows, list):
         raise InputError(f"{name} must be a list of {{start, end, label}}")
     if len(rows) > MAX_SEGMENTS:
         raise InputError(f"{name}: {len(rows)} segments, over the limit of {MAX_SEGMENTS}")
-    fps, last = context.fps, context.frames
+    fps, last = context.fps, context.last_frame
     out: List[Segment] = []
     prev_end, prev_frame = 0.0, 0
     for i, row in enumerate(rows):
@@ -171,12 +178,17 @@ def _tier(rows, name: str, context: Context) -> Timeline:
         label = label.strip()
         if not label:
             continue  # silence: a gap
+        if name == "visemes":  # kept as given: a diphthong's visemes meet between frames
+            out.append(Segment(start, min(end, context.duration), label))
+            continue
         a = max(_frame(start, fps), prev_frame)
         b = max(_frame(end, fps), a + 1)  # a segment keeps at least one frame, as in Papagayo
-        if b > last:
+        if a >= last and not a / fps < context.duration:
             raise InputError(f"{where}: no room for it before the end of the recording at {fps:g} fps "
                              f"(segments before it were given at least one frame each)")
-        out.append(Segment(a / fps, b / fps, label))
+        # the recording's end is a boundary too, on the grid or not
+        end_t = context.duration if b > last or abs(end - context.duration) < 1e-9 else b / fps
+        out.append(Segment(a / fps, end_t, label))
         prev_frame = b
     kind = VISEME if name == "visemes" else PHONEME
     return Timeline(tuple(out), kind=kind, stated_end=context.duration)
@@ -204,9 +216,9 @@ def snap_timeline(tl: Timeline, context: Context, *, kind: Optional[str] = None)
             continue
         a = max(_frame(r["start"], fps), prev)
         b = max(_frame(r["end"], fps), a + 1)
-        if b > context.frames:
+        if a / fps >= context.duration:
             break
-        out.append(Segment(a / fps, b / fps, r["label"].strip()))
+        out.append(Segment(a / fps, context.duration if b > context.last_frame else b / fps, r["label"].strip()))
         prev = b
     return Timeline(tuple(out), kind=kind or tl.kind, stated_end=context.duration)
 
@@ -224,31 +236,27 @@ def check_phones(phones: Timeline, context: Context) -> None:
 
 
 def derive_visemes(phones: Timeline, context: Context) -> Timeline:
-    """The bank's viseme tier for ``phones`` (the map, as ``lipsync render`` applies it), snapped."""
+    """The bank's viseme tier for ``phones``: exactly what ``lipsync render`` maps them to (so
+    the preview is render's frames). A diphthong's visemes share its time, so their common
+    boundary may fall between frames (half a frame at most)."""
     from ..phonetics.phonemes import bank_viseme_timeline
 
     tl, _ = bank_viseme_timeline(phones.replace(stated_end=context.duration), context.pmap, context.visemes,
                                  rest=context.rest)
-    return _cover(snap_timeline(tl, context, kind=VISEME), context)
+    return tl.replace(stated_end=context.duration)
 
 
 def _cover(visemes: Timeline, context: Context) -> Timeline:
-    """The viseme tier with its gaps filled by rest, neighbours of one shape merged."""
+    """The viseme tier with its gaps filled by rest (as the sequencer shows them), up to the end."""
     out: List[Segment] = []
     t = 0.0
-    for s in list(visemes) + [Segment(context.frames / context.fps, context.frames / context.fps, context.rest)]:
+    for s in list(visemes) + [Segment(context.duration, context.duration, context.rest)]:
         if s.start > t:
             out.append(Segment(t, s.start, context.rest))
         if s.end > s.start:
             out.append(s)
         t = max(t, s.end)
-    merged: List[Segment] = []
-    for s in out:
-        if merged and merged[-1].label == s.label and merged[-1].end == s.start:
-            merged[-1] = Segment(merged[-1].start, s.end, s.label)
-        else:
-            merged.append(s)
-    return Timeline(tuple(merged), kind=VISEME, stated_end=context.duration)
+    return Timeline(tuple(out), kind=VISEME, stated_end=context.duration)
 
 
 # ---------------------------------------------------------------- breakdown (retyping a word)
@@ -339,7 +347,7 @@ def load_doc(audio_duration: float, *, context: Context, timeline: Optional[str]
         words, phones = _read_file(timeline, tier, context.fps)
     words = snap_timeline(words, context, kind=PHONEME)
     if phones.kind == VISEME:
-        visemes = _cover(snap_timeline(_bank_names(phones, context), context, kind=VISEME), context)
+        visemes = _cover(_clip(_bank_names(phones, context), context), context)
         return TimingDoc(words, Timeline((), stated_end=context.duration), visemes, context, visemes_edited=True)
     phones = snap_timeline(phones, context)
     check_phones(phones, context)
@@ -421,7 +429,7 @@ def save_text(doc: TimingDoc, format: str, path: str, *, sound_file: str) -> Non
         if format == "moho":
             names = {v: aliases[0] for v, aliases in ctx.pmap.aliases.items() if aliases}
         write_cues(doc.visemes, path, format, rest=ctx.rest, fps=ctx.fps, names=names,
-                   sound_file=sound_file, duration=ctx.frames / ctx.fps)
+                   sound_file=sound_file, duration=ctx.duration)
     else:
         raise InputError(f"unknown format {format!r} (valid: {', '.join(SAVE_FORMATS)})")
 
@@ -432,7 +440,11 @@ def reload(path: str, format: str, context: Context) -> TimingDoc:
 
     if format in ("textgrid", "pgo"):
         return load_doc(context.duration, context=context, timeline=path)
-    tl = read_timeline(path, format, fps=context.fps)
-    return load_doc(context.duration, context=context, alignment=None, timeline=path) if tl.kind != VISEME else \
-        TimingDoc(Timeline(()), Timeline(()), _cover(snap_timeline(_bank_names(tl, context), context, kind=VISEME),
-                                                     context), context, visemes_edited=True)
+    return load_doc(context.duration, context=context, timeline=path)
+
+
+def _clip(tl: Timeline, context: Context) -> Timeline:
+    """``tl`` without what lies past the recording's end (a Moho file's last key, say)."""
+    d = context.duration
+    segs = tuple(Segment(s.start, min(s.end, d), s.label) for s in tl if s.start < d)
+    return tl.replace(segments=segs, stated_end=d)

@@ -5,7 +5,8 @@ header ``X-Lipsync-Token``; see :mod:`lipsync.web`):
 
 ``GET /api/timeline``
     ``{"words": [{"start", "end", "label"}], "phones": [...], "visemes": [...]}``: seconds
-    (float, whole frames at the editor's fps); silence is a gap (no segment).
+    (float; words and phones on whole frames at the editor's fps, visemes as the map splits
+    them); silence is a gap (no segment).
 ``PUT /api/timeline`` with the same JSON
     Validated (:meth:`lipsync.timing_editor.model.TimingDoc.from_json`) and snapped to the
     frame grid → 200 with the timeline as stored; bad input → 400 ``{"error": reason}`` and
@@ -142,7 +143,11 @@ class TimingEditor:
         c = self.context
         return {"duration": c.duration, "fps": c.fps, "visemes": list(c.visemes), "rest": c.rest,
                 "audio": os.path.basename(self.audio), "out": self.out, "lang": c.lang, "version": self.version,
-                "frames": c.frames, "shape": list(self.bank.shape[:2])}
+                "frames": self.frame_count(), "shape": list(self.bank.shape[:2])}
+
+    def frame_count(self) -> int:
+        """Frames ``lipsync render`` makes of the edited timeline at the editor's fps."""
+        return len(self.animator()[1])
 
     # ---------------------------------------------------------------- frames
     def animator(self):
@@ -164,7 +169,7 @@ class TimingEditor:
 
     def frame_index(self, t: float) -> int:
         """The frame shown at ``t`` (as :meth:`lipsync.Animator.frame_at` picks it)."""
-        n = self.context.frames
+        n = self.frame_count()
         pos = t * self.context.fps
         return 0 if pos <= 0 else n - 1 if pos >= n else min(int(math.floor(pos + 1e-9)), n - 1)
 

@@ -204,17 +204,19 @@ const derived = (doc) => ({ words: doc.words, phones: doc.phones, visemes: null 
 // them then lasts under a frame or overlaps its neighbour.
 function moveBoundary(doc, tiers, from, to) {
   const eps = 1e-6, f = 1 / fps(), next = clone(doc);
+  if (to < -eps || to > S.info.duration + eps) return null;
   for (const tier of tiers) {
     const segs = next[tier];
-    for (const s of segs) {
-      if (Math.abs(s.start - from) < eps) s.start = to;
-      if (Math.abs(s.end - from) < eps) s.end = to;
-    }
     for (let i = 0; i < segs.length; i++) {
-      if (segs[i].end - segs[i].start < f - eps) return null;
-      if (i && segs[i].start < segs[i - 1].end - eps) return null;
+      const s = segs[i];
+      let moved = false;
+      if (Math.abs(s.start - from) < eps) { s.start = to; moved = true; }
+      if (Math.abs(s.end - from) < eps) { s.end = to; moved = true; }
+      // only what moved is checked: the last rest may be shorter than a frame (the recording's end)
+      if (moved && (s.end - s.start < f - eps || (i && s.start < segs[i - 1].end - eps) ||
+                    (i + 1 < segs.length && s.end > segs[i + 1].start + eps && Math.abs(segs[i + 1].start - from) >= eps)))
+        return null;
     }
-    if (segs.length && (segs[0].start < -eps || segs[segs.length - 1].end > S.info.frames / fps() + eps)) return null;
   }
   return next;
 }
