@@ -65,6 +65,7 @@ docs-images: $(STAMP)
 	$(BIN)/lipsync morph visemes/toon X D --frames 5 -o docs/strip.png
 	$(BIN)/lipsync preview visemes/toon -o docs/preview.png
 	$(BIN)/python -m lipsync.editor.browser visemes/toon docs/editor.png
+	$(BIN)/python -m lipsync.timing_editor.browser tests/data/grid-s1-audio/bram2n.flac tests/data/grid-s1-audio/bram2n.align docs/timing-editor.png
 	$(BIN)/python tools/face_overlay.py docs/face-lines.jpg
 	$(BIN)/python tools/atlas_picture.py docs/atlas.jpg
 	$(BIN)/python tools/real_strip.py docs/strip-real.png

@@ -39,7 +39,7 @@ def timing_page(editor, driver, *, timeout: float = 60.0):
         session.close()
 
 
-def screenshot(audio, timeline, out, *, width: int = 1400, height: int = 560) -> None:
+def screenshot(audio, timeline, out, *, width: int = 1400, height: int = 600) -> None:
     """A PNG of the page on ``audio`` with ``timeline``: zoomed on the speech, a word selected,
     the cursor inside it and its mouth frame shown."""
     from .server import TimingEditor
