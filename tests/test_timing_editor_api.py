@@ -319,3 +319,40 @@ def test_page_assets_and_audio(client, editor):
     wav = client.get("/api/audio")
     assert wav.headers["content-type"] == "audio/wav"
     np.testing.assert_array_equal(np.frombuffer(wav.content[44:], "<i2"), editor.pcm)
+
+
+def test_module_examples_run():
+    import doctest
+
+    import lipsync.readers.papagayo
+    import lipsync.writers.papagayo
+
+    for module in (model_mod, server_mod, lipsync.writers.papagayo, lipsync.readers.papagayo):
+        result = doctest.testmod(module, optionflags=doctest.ELLIPSIS)
+        assert result.failed == 0 and result.attempted > 0, module.__name__
+
+
+def test_render_writes_the_video_with_the_previewed_frames(client, tmp_path):
+    r = client.post("/api/render")
+    assert r.status_code == 200, r.text
+    path = r.json()["path"]
+    assert path == str(tmp_path / "out" / "bram2n.mp4")
+    cap = cv2.VideoCapture(path)
+    frames = []
+    while True:
+        ok, bgr = cap.read()
+        if not ok:
+            break
+        frames.append(cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB))
+    n = client.get("/api/info").json()["frames"]
+    assert len(frames) == n
+    rest = decode(client.get("/api/frame?t=0").content).astype(int)
+    for i in (0, 30, 40, n - 1):  # H.264 is lossy: close, not equal
+        shown = decode(client.get(f"/api/frame?t={i / FPS}").content).astype(int)
+        assert np.abs(frames[i].astype(int) - shown).mean() < 3, i
+        if i in (30, 40):  # speech: where the preview's mouth is not the rest's, the video shows it too
+            mouth = np.abs(shown - rest).max(axis=2) > 40
+            assert mouth.sum() > 500
+            own = np.abs(frames[i].astype(int) - shown)[mouth].mean()
+            assert own < np.abs(frames[i].astype(int) - rest)[mouth].mean() / 4, i
+    assert os.listdir(tmp_path / "out") == ["bram2n.mp4"]

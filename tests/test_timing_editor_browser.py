@@ -121,6 +121,34 @@ def test_drag_retype_save_preview(tmp_path, driver):
                      f"document.getElementById('mouth').dataset.version === String({S}.version)", what="the frame")
         shown = shown_frame(driver)
 
+        # split the phone under the cursor (S), merge it back (M), undo and redo, make a viseme a rest
+        body = driver.find_element("tag name", "body")
+        n_phones = len(final["phones"])
+        canvas, x, y = at(driver, cursor, "phones")
+        ActionChains(driver).move_to_element_with_offset(canvas, x, y).click().perform()
+        for key, count in (("s", n_phones + 1), ("m", n_phones)):
+            version = driver.execute_script(f"return {S}.version")
+            body.send_keys(key)
+            settled(driver, version)
+            assert len(driver.execute_script(f"return {S}.doc.phones")) == count, key
+        assert editor.get() == final  # merged back: the same timeline
+        for keys, count in (((Keys.CONTROL, "z"), n_phones + 1), ((Keys.CONTROL, "y"), n_phones)):
+            version = driver.execute_script(f"return {S}.version")
+            ActionChains(driver).key_down(keys[0]).send_keys(keys[1]).key_up(keys[0]).perform()
+            settled(driver, version)
+            assert len(editor.get()["phones"]) == count, keys
+        canvas, x, y = at(driver, cursor, "visemes")
+        ActionChains(driver).move_to_element_with_offset(canvas, x, y).click().perform()
+        version = driver.execute_script(f"return {S}.version")
+        body.send_keys(Keys.DELETE)
+        settled(driver, version)
+        vis = [v for v in editor.get()["visemes"] if v["start"] <= cursor < v["end"]]
+        assert vis[0]["label"] == editor.bank.rest
+        version = driver.execute_script(f"return {S}.version")
+        ActionChains(driver).key_down(Keys.CONTROL).send_keys("z").key_up(Keys.CONTROL).perform()
+        settled(driver, version)
+        assert editor.get() == final
+
     # the saved files carry exactly those edits, and nothing else changed
     expect_words = json.loads(json.dumps(start["words"]))
     expect_words[4]["end"] = expect_words[5]["start"] = 1.42
