@@ -148,6 +148,8 @@ def test_put_frame_save_reload(client, editor, tmp_path):
     assert rows(read_timeline(paths["textgrid"])) == stored["phones"]
     assert rows(read_timeline(paths["pgo"])) == stored["phones"]
     assert rows(read_words(paths["pgo"])) == stored["words"]
+    # Papagayo opens the sound relative to the project
+    assert Path(paths["pgo"]).read_text().split("\n")[1] == os.path.relpath(AUDIO.resolve(), tmp_path / "out")
     assert rows(read_timeline(paths["rhubarb-tsv"])) == stored["visemes"]
     assert rows(read_timeline(paths["rhubarb-json"])) == stored["visemes"]
     moho = editor.map.aliases  # the map's Preston Blair names, back to its own

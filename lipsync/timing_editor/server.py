@@ -228,7 +228,10 @@ class TimingEditor:
                              f"(start with -o OTHER to save elsewhere)")
         with self._lock:
             doc = self.doc
-        return replace_keeping_backup(path, lambda tmp: save_text(doc, format, tmp, sound_file=self.audio))
+        # Papagayo finds the sound relative to the project; Rhubarb's metadata names it in full
+        sound = os.path.relpath(os.path.abspath(self.audio), os.path.dirname(os.path.abspath(path))) \
+            if format == "pgo" else os.path.abspath(self.audio)
+        return replace_keeping_backup(path, lambda tmp: save_text(doc, format, tmp, sound_file=sound))
 
     def render(self) -> str:
         """Render the edited timeline with the audio to OUT's ``.mp4`` (atomic, as ``lipsync render``)."""

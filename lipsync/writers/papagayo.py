@@ -90,7 +90,8 @@ def _word_rows(words: Timeline, phones: Timeline, fps: float) -> List[Tuple[str,
 
 def to_pgo(words: Timeline, phones: Timeline, *, duration: float, fps: float, sound_file: str,
            voice: str = "Voice 1") -> str:
-    """The text of a one-voice Papagayo project (see the module docstring).
+    """The text of a one-voice Papagayo project (see the module docstring); ``sound_file`` is
+    written as given (Papagayo reads it relative to the project's folder).
 
     Raises
     ------
@@ -109,7 +110,7 @@ def to_pgo(words: Timeline, phones: Timeline, *, duration: float, fps: float, so
         if not text.strip() or len(text.split()) != 1:
             raise InputError(f"a Papagayo word is one token without spaces, not {text!r}: retype it")
     text = " ".join(r[0] for r in rows)
-    out = ["lipsync version 1", os.path.basename(sound_file), f"{fps:g}", str(max(1, _frames(duration, fps))), "1",
+    out = ["lipsync version 1", sound_file, f"{fps:g}", str(max(1, _frames(duration, fps))), "1",
            f"\t{voice}", f"\t{text}", "\t1" if rows else "\t0"]
     if rows:
         out += [f"\t\t{text}", f"\t\t{rows[0][1]}", f"\t\t{rows[-1][2]}", f"\t\t{len(rows)}"]
