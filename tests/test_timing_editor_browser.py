@@ -181,3 +181,38 @@ def test_drag_retype_save_preview(tmp_path, driver):
     # and the moved boundary shows: the unedited timeline's frame there is another
     original = TimingEditor(AUDIO, timeline=ALIGN, fps=FPS, out=tmp_path / "y").frame(index / FPS)
     assert np.abs(original.astype(int) - rendered.astype(int)).max() > 40
+
+
+def test_space_plays_a_looped_selection_with_the_mouth(tmp_path, driver):
+    import time
+
+    editor = TimingEditor(AUDIO, timeline=ALIGN, fps=FPS, out=tmp_path / "out")
+    with timing_page(editor, driver):
+        S = "window.lipsyncTiming"
+        canvas, x0, y = at(driver, 1.0, "wave")
+        _, x1, _ = at(driver, 1.4, "wave")
+        from selenium.webdriver.common.action_chains import ActionChains
+        from selenium.webdriver.common.keys import Keys
+
+        # shift-drag on the waveform selects the loop (snapped to frames), then tick loop
+        ActionChains(driver).move_to_element_with_offset(canvas, x0, y).key_down(Keys.SHIFT).click_and_hold() \
+            .move_by_offset(x1 - x0, 0).release().key_up(Keys.SHIFT).perform()
+        assert driver.execute_script(f"return {S}.loopSel") == [1.0, 1.4]
+        driver.find_element("id", "loop").click()
+        body = driver.find_element("tag name", "body")
+        body.send_keys(" ")
+        wait(driver, f"{S}.playing", what="playback")
+        cursors, frames = [], set()
+        deadline = time.monotonic() + 2.5
+        while time.monotonic() < deadline:
+            cursors.append(driver.execute_script(f"return {S}.cursor"))
+            frames.add(driver.execute_script("return document.getElementById('mouth').dataset.frame"))
+            time.sleep(0.03)
+        body.send_keys(" ")
+        wait(driver, f"!{S}.playing", what="pause")
+    # the cursor stayed in the loop (a frame of slack for the clock's step) and went round it
+    assert min(cursors) >= 1.0 and max(cursors) <= 1.4 + 0.1
+    assert any(b < a - 0.2 for a, b in zip(cursors, cursors[1:])), "never wrapped around"
+    # the mouth followed: several of the loop's frames were shown
+    shown = {int(f) for f in frames if f is not None}
+    assert len(shown & set(range(int(1.0 * FPS), int(1.4 * FPS) + 1))) >= 5, shown

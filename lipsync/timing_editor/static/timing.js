@@ -318,9 +318,11 @@ function setCursor(t, fromAudio = false) {
   if (x < 0 || x > width()) { S.t0 = S.cursor - 0.1 * width() / S.pxPerS; clampView(); }
   draw(); showMouth();
 }
-function play() {
+async function play() {
   if (S.playing) { audio.pause(); return; }
   if (S.loopSel && $("loop").checked && (S.cursor < S.loopSel[0] || S.cursor >= S.loopSel[1])) S.cursor = S.loopSel[0];
+  // a seek before the audio's metadata has loaded is dropped: wait for it
+  if (audio.readyState < 1) await new Promise((resolve) => audio.addEventListener("loadedmetadata", resolve, { once: true }));
   audio.currentTime = S.cursor;
   audio.play().catch((e) => say(`cannot play: ${e.message}`, true));
 }
@@ -442,7 +444,9 @@ window.addEventListener("resize", () => { clampView(); draw(); });
     $("file").textContent = `${info.audio} · ${info.duration.toFixed(2)} s · ${info.fps} fps`;
     const choice = $("viseme-choice");
     for (const v of info.visemes) { const o = document.createElement("option"); o.value = o.textContent = v; choice.appendChild(o); }
-    audio.src = `/api/audio?token=${encodeURIComponent(TOKEN)}`;
+    // a blob is seekable whatever the server does about Range requests
+    api("/api/audio").then((r) => r.blob()).then((b) => { audio.src = URL.createObjectURL(b); })
+      .catch((e) => say(`cannot load the audio: ${e.message}`, true));
     fitView(); updateButtons();
     S.version = 1;
     showMouth();
