@@ -315,6 +315,111 @@ def replace_keeping_backup(path: str, produce) -> str:
     return path
 
 
+#: The page's Content-Security-Policy: lipsync.web's, plus media from this origin and blobs
+#: (the page plays the recording from a blob, which seeks without Range requests).
+CSP = ("default-src 'self'; img-src 'self' data: blob:; media-src 'self' blob:; style-src 'self'; "
+       "script-src 'self'; connect-src 'self'; frame-ancestors 'none'; base-uri 'none'; form-action 'self'")
+
+
+def _bad(message: str, status: int = 400):
+    from starlette.responses import JSONResponse
+
+    return JSONResponse({"error": message}, status_code=status)
+
+
+async def _body_json(request):
+    """(payload, None) or (None, a 400 response)."""
+    try:
+        return json.loads(await request.body()), None
+    except (ValueError, RecursionError):
+        return None, _bad("the request body must be JSON")
+
+
+class _Api:
+    """The request handlers over one :class:`TimingEditor` (module docstring: the API)."""
+
+    def __init__(self, editor: TimingEditor):
+        self.editor = editor
+        self._peaks: Optional[bytes] = None
+        self._wav: Optional[bytes] = None
+
+    async def _call(self, fn, *args):
+        """``fn(*args)`` in a worker thread as JSON; InputError -> 400, OSError -> 500."""
+        from starlette.concurrency import run_in_threadpool
+        from starlette.responses import JSONResponse
+
+        try:
+            return JSONResponse(await run_in_threadpool(fn, *args))
+        except InputError as exc:
+            return _bad(str(exc))
+        except OSError as exc:
+            return _bad(f"cannot write: {exc}", 500)
+
+    async def index(self, request):
+        from starlette.responses import FileResponse
+
+        return FileResponse(STATIC / "index.html", headers={"Cache-Control": "no-store"})
+
+    async def timeline(self, request):
+        from starlette.responses import JSONResponse
+
+        if request.method == "GET":
+            return JSONResponse(self.editor.get())
+        obj, err = await _body_json(request)
+        return err or await self._call(self.editor.put, obj)
+
+    async def retype(self, request):
+        obj, err = await _body_json(request)
+        if err:
+            return err
+        if not isinstance(obj, dict):
+            return _bad('expected {"index": WORD_NUMBER, "label": "text"}')
+        return await self._call(self.editor.retype, obj.get("index"), obj.get("label"))
+
+    async def frame(self, request):
+        from starlette.concurrency import run_in_threadpool
+        from starlette.responses import Response
+
+        try:
+            t = float(request.query_params.get("t"))
+        except (TypeError, ValueError):
+            return _bad("t must be a time in seconds, e.g. /api/frame?t=1.25")
+        if not math.isfinite(t) or t < 0 or t > self.editor.context.duration:
+            return _bad(f"t must be within 0..{self.editor.context.duration:g} s")
+        png = await run_in_threadpool(self.editor.frame_png, t)
+        return Response(png, media_type="image/png",
+                        headers={"Cache-Control": "no-store", "X-Lipsync-Version": str(self.editor.version),
+                                 "X-Lipsync-Frame": str(self.editor.frame_index(t))})
+
+    async def save(self, request):
+        fmt = request.query_params.get("format", "")
+        if fmt not in SAVE_FORMATS:
+            return _bad(f"format must be one of {', '.join(SAVE_FORMATS)}")
+        return await self._call(lambda: {"path": self.editor.save(fmt)})
+
+    async def render(self, request):
+        return await self._call(lambda: {"path": self.editor.render()})
+
+    def info(self, request):
+        from starlette.responses import JSONResponse
+
+        return JSONResponse(self.editor.info())
+
+    def peaks(self, request):
+        from starlette.responses import Response
+
+        if self._peaks is None:  # made once: the recording does not change
+            self._peaks = json.dumps(self.editor.peaks()).encode()
+        return Response(self._peaks, media_type="application/json")
+
+    def audio(self, request):
+        from starlette.responses import Response
+
+        if self._wav is None:
+            self._wav = self.editor.wav()
+        return Response(self._wav, media_type="audio/wav")
+
+
 def make_app(editor: TimingEditor, session: Session, *, max_body: int = MAX_BODY):
     """The Starlette app of the page and the API, wrapped in :class:`lipsync.web.Guard`.
 
@@ -332,108 +437,21 @@ def make_app(editor: TimingEditor, session: Session, *, max_body: int = MAX_BODY
     >>> s.close()
     """
     from starlette.applications import Starlette
-    from starlette.concurrency import run_in_threadpool
-    from starlette.responses import FileResponse, JSONResponse, Response
     from starlette.routing import Mount, Route
     from starlette.staticfiles import StaticFiles
 
-    def bad(message: str, status: int = 400) -> JSONResponse:
-        return JSONResponse({"error": message}, status_code=status)
-
-    async def body_json(request):
-        try:
-            return json.loads(await request.body()), None
-        except (ValueError, RecursionError):
-            return None, bad("the request body must be JSON")
-
-    async def index(request):
-        return FileResponse(STATIC / "index.html", headers={"Cache-Control": "no-store"})
-
-    async def timeline(request):
-        if request.method == "GET":
-            return JSONResponse(editor.get())
-        obj, err = await body_json(request)
-        if err:
-            return err
-        try:
-            return JSONResponse(await run_in_threadpool(editor.put, obj))
-        except InputError as exc:
-            return bad(str(exc))
-
-    async def retype_word(request):
-        obj, err = await body_json(request)
-        if err:
-            return err
-        if not isinstance(obj, dict):
-            return bad('expected {"index": WORD_NUMBER, "label": "text"}')
-        try:
-            return JSONResponse(await run_in_threadpool(editor.retype, obj.get("index"), obj.get("label")))
-        except InputError as exc:
-            return bad(str(exc))
-
-    async def frame(request):
-        raw = request.query_params.get("t")
-        try:
-            t = float(raw)
-        except (TypeError, ValueError):
-            return bad("t must be a time in seconds, e.g. /api/frame?t=1.25")
-        if not math.isfinite(t) or t < 0 or t > editor.context.duration:
-            return bad(f"t must be within 0..{editor.context.duration:g} s")
-        png = await run_in_threadpool(editor.frame_png, t)
-        return Response(png, media_type="image/png",
-                        headers={"Cache-Control": "no-store", "X-Lipsync-Version": str(editor.version),
-                                 "X-Lipsync-Frame": str(editor.frame_index(t))})
-
-    async def save(request):
-        fmt = request.query_params.get("format", "")
-        if fmt not in SAVE_FORMATS:
-            return bad(f"format must be one of {', '.join(SAVE_FORMATS)}")
-        try:
-            return JSONResponse({"path": await run_in_threadpool(editor.save, fmt)})
-        except InputError as exc:
-            return bad(str(exc))
-        except OSError as exc:
-            return bad(f"cannot write: {exc}", 500)
-
-    async def render(request):
-        try:
-            return JSONResponse({"path": await run_in_threadpool(editor.render)})
-        except InputError as exc:
-            return bad(str(exc))
-        except OSError as exc:
-            return bad(f"cannot write: {exc}", 500)
-
-    def info(request):
-        return JSONResponse(editor.info())
-
-    peaks_json = {}
-
-    def peaks(request):
-        if "body" not in peaks_json:
-            peaks_json["body"] = json.dumps(editor.peaks()).encode()
-        return Response(peaks_json["body"], media_type="application/json")
-
-    wav_bytes = {}
-
-    def audio(request):
-        if "body" not in wav_bytes:
-            wav_bytes["body"] = editor.wav()
-        return Response(wav_bytes["body"], media_type="audio/wav")
-
+    api = _Api(editor)
     routes = [
-        Route("/", index),
-        Route("/index.html", index),
-        Route("/api/timeline", timeline, methods=["GET", "PUT"]),
-        Route("/api/retype", retype_word, methods=["POST"]),
-        Route("/api/frame", frame),
-        Route("/api/save", save, methods=["POST"]),
-        Route("/api/render", render, methods=["POST"]),
-        Route("/api/info", info),
-        Route("/api/peaks", peaks),
-        Route("/api/audio", audio),
+        Route("/", api.index),
+        Route("/index.html", api.index),
+        Route("/api/timeline", api.timeline, methods=["GET", "PUT"]),
+        Route("/api/retype", api.retype, methods=["POST"]),
+        Route("/api/frame", api.frame),
+        Route("/api/save", api.save, methods=["POST"]),
+        Route("/api/render", api.render, methods=["POST"]),
+        Route("/api/info", api.info),
+        Route("/api/peaks", api.peaks),
+        Route("/api/audio", api.audio),
         Mount("/static", app=StaticFiles(directory=STATIC)),
     ]
-    return Guard(Starlette(routes=routes), session=session, max_body=max_body,
-                 csp="default-src 'self'; img-src 'self' data: blob:; media-src 'self' blob:; style-src 'self'; "
-                     "script-src 'self'; connect-src 'self'; frame-ancestors 'none'; base-uri 'none'; "
-                     "form-action 'self'")
+    return Guard(Starlette(routes=routes), session=session, max_body=max_body, csp=CSP)
