@@ -358,3 +358,31 @@ def test_render_writes_the_video_with_the_previewed_frames(client, tmp_path):
             own = np.abs(frames[i].astype(int) - shown)[mouth].mean()
             assert own < np.abs(frames[i].astype(int) - rest)[mouth].mean() / 4, i
     assert os.listdir(tmp_path / "out") == ["bram2n.mp4"]
+
+
+def test_a_changed_phone_changes_its_viseme(client):
+    doc = client.get("/api/timeline").json()
+    b = doc["phones"][0]
+    assert (b["label"], b["start"], b["end"]) == ("B", 0.52, 0.6)  # "bin" begins with closed lips
+    assert [v["label"] for v in doc["visemes"] if v["start"] == 0.52] == ["A"]
+    doc["phones"][0]["label"] = "AA"  # the map (english-to-rhubarb): AA -> D, wide open
+    doc["visemes"] = None
+    stored = client.put("/api/timeline", json=doc).json()
+    assert [(v["label"], v["end"]) for v in stored["visemes"] if v["start"] == 0.52] == [("D", 0.6)]
+    # a viseme changed by hand is kept as given (and its segment keeps its times)
+    stored["visemes"] = [dict(v, label="G") if v["start"] == 0.52 else v for v in stored["visemes"]]
+    again = client.put("/api/timeline", json=stored).json()
+    assert again == stored
+
+
+def test_retyping_in_another_language_uses_its_letters_to_sounds(tmp_path):
+    from lipsync.phonetics.g2p import espeak_available
+
+    if not espeak_available():
+        pytest.skip("espeak-ng (the languages extra) is not installed")
+    # Spanish "sol": espeak-ng's IPA s, o, l, spread over the word
+    ed = TimingEditor(AUDIO, timeline=ALIGN, fps=FPS, out=tmp_path / "o", lang="es")
+    doc = ed.retype(0, "sol")
+    w = doc["words"][0]
+    inside = [p["label"] for p in doc["phones"] if w["start"] <= p["start"] and p["end"] <= w["end"]]
+    assert w["label"] == "sol" and inside == ["s", "o", "l"]
