@@ -386,3 +386,14 @@ def test_retyping_in_another_language_uses_its_letters_to_sounds(tmp_path):
     w = doc["words"][0]
     inside = [p["label"] for p in doc["phones"] if w["start"] <= p["start"] and p["end"] <= w["end"]]
     assert w["label"] == "sol" and inside == ["s", "o", "l"]
+
+
+def test_where_saves_go(tmp_path):
+    def target(out, ext):
+        return TimingEditor(AUDIO, timeline=ALIGN, out=out).target(ext)
+
+    assert target(None, ".pgo") == str(DATA.resolve() / "bram2n.edited.pgo")  # beside the audio
+    assert target(tmp_path, ".tsv") == str(tmp_path / "bram2n.edited.tsv")  # into a folder
+    assert target(tmp_path / "fixed.mp4", ".TextGrid") == str(tmp_path / "fixed.TextGrid")
+    assert target(tmp_path / "fixed.mp4", ".mp4") == str(tmp_path / "fixed.mp4")
+    assert target(tmp_path / "take2", ".dat") == str(tmp_path / "take2.dat")

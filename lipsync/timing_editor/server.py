@@ -80,7 +80,8 @@ class TimingEditor:
     fps : float
         The frame grid and the preview's frame rate.
     out : path-like, optional
-        Where saves go (default: beside the audio, ``NAME.edited.EXT``).
+        Where saves go: OUT itself when its extension is the saved format's, else OUT with
+        that extension; a folder gets ``NAME.edited.EXT`` in it (default: beside the audio).
     """
 
     def __init__(self, audio, *, text: Optional[str] = None, timeline=None, lang: Optional[str] = None,
@@ -109,8 +110,10 @@ class TimingEditor:
 
             self.alignment = align(self.pcm, text, quiet=quiet, lang=lang)
             self.doc = load_doc(duration, context=self.context, alignment=self.alignment)
-        self.out = os.fspath(out) if out is not None else \
-            os.path.join(os.path.dirname(os.path.abspath(self.audio)), Path(self.audio).stem + ".edited")
+        # OUT: where saves go (OUT.TextGrid, ...); a folder gets the audio's name in it
+        folder = os.path.dirname(os.path.abspath(self.audio)) if out is None else os.fspath(out)
+        self.out = os.path.join(folder, Path(self.audio).stem + ".edited") \
+            if out is None or os.path.isdir(folder) else os.fspath(out)
         self.version = 1
         self._lock = threading.RLock()
         self._anim = None  # (version, Animator, Compositor)
@@ -264,7 +267,7 @@ class TimingEditor:
         return buf.getvalue()
 
 
-_KNOWN_EXTS = {ext.lower() for ext, _ in SAVE_FORMATS.values()} | {".mp4", ".edited"}
+_KNOWN_EXTS = {ext.lower() for ext, _ in SAVE_FORMATS.values()} | {".mp4"}
 
 
 def load_pcm(path: str) -> np.ndarray:
