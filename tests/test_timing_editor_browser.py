@@ -194,6 +194,21 @@ def test_space_plays_a_looped_selection_with_the_mouth(tmp_path, driver):
         from selenium.webdriver.common.action_chains import ActionChains
         from selenium.webdriver.common.keys import Keys
 
+        # zoom in around the cursor (+), scroll with the bar, fit the whole recording again
+        fit = driver.execute_script(f"return {S}.pxPerS")
+        width = driver.execute_script("return document.getElementById('timeline').clientWidth")
+        assert fit == pytest.approx(width / editor.context.duration)
+        driver.find_element("tag name", "body").send_keys("+")
+        assert driver.execute_script(f"return {S}.pxPerS") == pytest.approx(1.5 * fit)
+        driver.execute_script("const s = document.getElementById('scroll'); s.value = 1000;"
+                              "s.dispatchEvent(new Event('input'))")
+        span = width / (1.5 * fit)
+        assert driver.execute_script(f"return {S}.t0") == pytest.approx(editor.context.duration - span)
+        driver.find_element("id", "zoom-fit").click()
+        assert driver.execute_script(f"return [{S}.t0, {S}.pxPerS]") == [0, pytest.approx(fit)]
+        canvas, x0, y = at(driver, 1.0, "wave")
+        _, x1, _ = at(driver, 1.4, "wave")
+
         # shift-drag on the waveform selects the loop (snapped to frames), then tick loop
         ActionChains(driver).move_to_element_with_offset(canvas, x0, y).key_down(Keys.SHIFT).click_and_hold() \
             .move_by_offset(x1 - x0, 0).release().key_up(Keys.SHIFT).perform()
