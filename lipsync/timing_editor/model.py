@@ -67,6 +67,15 @@ class Context:
         The bank's rest viseme (gaps in the viseme tier).
     pmap : PhonemeMap, optional
         The phoneme map (default: the shipped English one).
+    lang : str, optional
+        The speech's language (BCP 47): a retyped word's phones come from its
+        letters-to-sounds (default: English, CMUdict).
+
+    Examples
+    --------
+    >>> c = Context(duration=2.99, fps=25)
+    >>> c.last_frame, c.rest
+    (74, 'X')
     """
 
     duration: float
@@ -97,6 +106,13 @@ class TimingDoc:
 
     ``visemes_edited`` is True once the viseme tier was changed by hand (it is then kept
     as given instead of being derived from the phones).
+
+    Examples
+    --------
+    >>> doc = TimingDoc.from_json({"words": [], "phones": [{"start": 0.5, "end": 0.61, "label": "M"}]},
+    ...                           context=Context(duration=1.0))
+    >>> doc.to_json()["phones"], [v.label for v in doc.visemes]
+    ([{'start': 0.52, 'end': 0.6, 'label': 'M'}], ['X', 'A', 'X'])
     """
 
     words: Timeline
@@ -432,15 +448,6 @@ def save_text(doc: TimingDoc, format: str, path: str, *, sound_file: str) -> Non
                    sound_file=sound_file, duration=ctx.duration)
     else:
         raise InputError(f"unknown format {format!r} (valid: {', '.join(SAVE_FORMATS)})")
-
-
-def reload(path: str, format: str, context: Context) -> TimingDoc:
-    """A saved file read back as a doc (what reopening it in the editor gives)."""
-    from ..readers import read_timeline
-
-    if format in ("textgrid", "pgo"):
-        return load_doc(context.duration, context=context, timeline=path)
-    return load_doc(context.duration, context=context, timeline=path)
 
 
 def _clip(tl: Timeline, context: Context) -> Timeline:

@@ -82,6 +82,18 @@ class TimingEditor:
     out : path-like, optional
         Where saves go: OUT itself when its extension is the saved format's, else OUT with
         that extension; a folder gets ``NAME.edited.EXT`` in it (default: beside the audio).
+
+    Examples
+    --------
+    >>> import os, tempfile
+    >>> from lipsync._data import default_bank_dir
+    >>> samples = os.path.join(os.path.dirname(default_bank_dir()), "..", "samples")
+    >>> ed = TimingEditor(os.path.join(samples, "hello.wav"), timeline=os.path.join(samples, "hello.TextGrid"),
+    ...                   out=tempfile.mkdtemp())
+    >>> [w["label"] for w in ed.get()["words"]][:2], ed.frame(1.0).shape
+    (['hello', 'i'], (512, 512, 3))
+    >>> os.path.basename(ed.save("pgo"))
+    'hello.edited.pgo'
     """
 
     def __init__(self, audio, *, text: Optional[str] = None, timeline=None, lang: Optional[str] = None,
@@ -288,7 +300,17 @@ def load_pcm(path: str) -> np.ndarray:
 
 def replace_keeping_backup(path: str, produce) -> str:
     """Run ``produce(tmp)`` to write a complete file, then keep ``path``'s old content as
-    ``path.bak`` and rename the new one into place: a failure leaves ``path`` as it was."""
+    ``path.bak`` and rename the new one into place: a failure leaves ``path`` as it was.
+
+    Examples
+    --------
+    >>> import os, tempfile
+    >>> p = os.path.join(tempfile.mkdtemp(), "a.txt")
+    >>> _ = replace_keeping_backup(p, lambda tmp: open(tmp, "w").write("one"))
+    >>> _ = replace_keeping_backup(p, lambda tmp: open(tmp, "w").write("two"))
+    >>> open(p).read(), open(p + ".bak").read(), sorted(os.listdir(os.path.dirname(p)))
+    ('two', 'one', ['a.txt', 'a.txt.bak'])
+    """
     from .._files import partial_name, remove_stale_partials
 
     folder = os.path.dirname(os.path.abspath(path)) or "."
