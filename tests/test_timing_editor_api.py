@@ -244,6 +244,9 @@ def test_bad_timelines_are_400_and_change_nothing(client):
         assert r.status_code == 400, name
         assert reason in r.json()["error"], (name, r.json())
         assert client.get("/api/timeline").json() == doc, name
+    many = {"words": [{"start": 0, "end": 0.04, "label": "a"}] * (model_mod.MAX_SEGMENTS + 1), "phones": []}
+    r = client.put("/api/timeline", json=many)
+    assert r.status_code == 400 and "over the limit" in r.json()["error"]
     for body in (b"not json", b"[1, 2]", b"null"):
         r = client.put("/api/timeline", content=body)
         assert r.status_code == 400 and "error" in r.json()
