@@ -177,7 +177,7 @@ function newVersion(doc) {
 // ---------------------------------------------------------------- edits (all through the server)
 const clone = (doc) => JSON.parse(JSON.stringify(doc));
 async function commit(next, opts = {}) {
-  if (S.busy) return false;
+  if (S.busy) { say("the previous change is still being stored: try again", true); draw(); return false; }
   S.busy = true;
   const before = S.doc;
   try {
