@@ -284,6 +284,10 @@ def test_bad_inputs_to_the_editor(tmp_path, monkeypatch):
     overlapping.write_text("0 13000 sil\n13000 19250 bin\n15000 24750 red\n")
     with pytest.raises(InputError, match="bad.align"):
         TimingEditor(AUDIO, timeline=overlapping)
+    unknown = tmp_path / "cues.txt"  # Audacity labels with a phone no map knows
+    unknown.write_text("0.5\t0.7\tQQ\n0.7\t0.9\tAA\n")
+    with pytest.raises(InputError, match=r"cues\.txt.*unknown phone label\(s\): QQ"):
+        TimingEditor(AUDIO, timeline=unknown)
     # the length bound (an hour; lowered here so a 3 s file is "too long")
     monkeypatch.setattr(server_mod, "MAX_AUDIO_S", 2.0)
     with pytest.raises(InputError, match="longer than the editor's limit"):

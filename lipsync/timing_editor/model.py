@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import math
 import os
+import re
 import warnings
 from dataclasses import dataclass, field
 from typing import Dict, List, Optional, Sequence, Tuple
@@ -246,9 +247,11 @@ def check_phones(phones: Timeline, context: Context) -> None:
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", UnknownLabelWarning)
         map_timeline(phones, context.pmap, rest=context.rest)
-    bad = [str(w.message) for w in caught if issubclass(w.category, UnknownLabelWarning)]
-    if bad:
-        raise InputError("phones: unknown phone label: " + "; ".join(bad[:4]))
+    said = [str(w.message) for w in caught if issubclass(w.category, UnknownLabelWarning)]
+    if said:
+        labels = [m.group(1) for m in (re.search(r"label '([^']*)'", t) for t in said) if m] or said
+        raise InputError(f"unknown phone label(s): {', '.join(labels[:8])} (the map "
+                         f"{getattr(context.pmap, 'name', '')!r} has no viseme for them; write ARPAbet or IPA)")
 
 
 def derive_visemes(phones: Timeline, context: Context) -> Timeline:
@@ -366,7 +369,10 @@ def load_doc(audio_duration: float, *, context: Context, timeline: Optional[str]
         visemes = _cover(_clip(_bank_names(phones, context), context), context)
         return TimingDoc(words, Timeline((), stated_end=context.duration), visemes, context, visemes_edited=True)
     phones = snap_timeline(phones, context)
-    check_phones(phones, context)
+    try:
+        check_phones(phones, context)
+    except InputError as exc:
+        raise InputError(str(exc), path=timeline or getattr(alignment, "path", None)) from None
     return TimingDoc.derived(words, phones, context)
 
 
