@@ -89,6 +89,10 @@ BLINK_DUE_BONUS = 8.0
 #: Temperature of the random choice among cheap joins, in median frame steps (Schödl et
 #: al.'s sigma): cheaper joins are likelier, but not always the same one.
 JOIN_SIGMA = 0.5
+#: A run's join is looked for from at most this many exit frames (spread evenly over the run's
+#: allowed range) and, from each, among its this many cheapest joins: a run's choice then
+#: costs the same on a 3 s plate as on a 10-minute video.
+EXITS, JOINS_PER_EXIT = 100, 64
 #: Each frame keeps its this many cheapest joins (found block by block: memory O(N K)); a
 #: plate of at most this many frames keeps every join (a still stretch's frames are each
 #: other's nearest: a short list would never leave it).
@@ -218,8 +222,11 @@ class PlateTimes:
         if self.busy[i]:
             return []
         out = []
-        for j, c in zip(self.idx[i].tolist(), self.cost[i].tolist()):
-            if np.isfinite(c) and not self.busy[j] and abs(j - (i + 1)) >= self.min_jump:
+        for k in np.argsort(self.cost[i], kind="stable").tolist():
+            j, c = int(self.idx[i, k]), float(self.cost[i, k])
+            if not np.isfinite(c) or len(out) >= JOINS_PER_EXIT:
+                break
+            if not self.busy[j] and abs(j - (i + 1)) >= self.min_jump:
                 out.append((j, c))
         return out
 
@@ -346,7 +353,9 @@ class PlateTimeline:
         t = self.times
         first = min(pos + max(t.min_run, self._straight if not self._plan else 0) - 1, limit) if strict else pos
         options = []
-        for e in range(max(first, pos), limit + 1):
+        lo = max(first, pos)
+        exits = np.unique(np.linspace(lo, limit, EXITS).round().astype(int)).tolist() if limit >= lo else []
+        for e in exits:
             seen = self._blinks_in(pos, e, at, last) if strict else {}
             when = at + e - pos + 1
             for j, c in t.joins(e):
