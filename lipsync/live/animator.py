@@ -189,6 +189,7 @@ class LiveAnimator:
         self._events: List[Tuple[float, float, str]] = []   # mixed: events not yet pushed
         self._tail: Optional[List[Tuple[float, float, str]]] = None   # provisional segments
         self._finished = False          # audio: finish_audio was called
+        self._closed = False            # audio: close was called (the recogniser freed)
 
     # ------------------------------------------------------------------ input
     def push(self, start, end: Optional[float] = None, label: Optional[str] = None, *,
@@ -425,8 +426,8 @@ class LiveAnimator:
         from .audio import AudioFrontEnd
 
         with self._state:
-            if self._finished:
-                raise InputError("the audio has ended (finish_audio was called); start a new animator")
+            if self._finished or self._closed:
+                raise InputError("the audio has ended (finish_audio or close was called); start a new animator")
             if self._fe is None:
                 self._fe = AudioFrontEnd()
             self._fe.add(samples, sample_rate)
@@ -476,7 +477,7 @@ class LiveAnimator:
         from ..motion.frames import frame_count
 
         with self._state:
-            if self._fe is None or self._finished:
+            if self._fe is None or self._finished or self._closed:
                 return []
             self._fe.end()
             self._tail = None
@@ -497,6 +498,29 @@ class LiveAnimator:
         from ..motion.frames import frame_count
 
         return max(len(self._shown), frame_count(self._fe.duration, self.fps))
+
+    def close(self) -> None:
+        """Free the audio front-end (the recogniser's ~30 MB) and give the memory back to the
+        system (:func:`lipsync.live.audio.trim_memory`); a server calls it when a session
+        ends. Frames already fixed stay readable; more audio is refused.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from lipsync._data import default_bank_dir
+        >>> live = LiveAnimator(default_bank_dir(), prepare=False)
+        >>> _ = live.feed_audio(np.zeros(3200, np.int16)); live.close()
+        >>> live.spec(0).shown
+        'X'
+        """
+        from .audio import trim_memory
+
+        with self._state:
+            if self._fe is None or self._closed:
+                return
+            self._fe.close()
+            self._closed = True
+        trim_memory()
 
     @property
     def audio_time(self) -> float:

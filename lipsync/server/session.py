@@ -93,6 +93,18 @@ class LiveSession:
                 await sender
             except (asyncio.CancelledError, Exception):
                 pass
+            await self._release(self.live)
+            self.live = None
+
+    async def _release(self, live: Optional[LiveAnimator]) -> None:
+        """Free an animator's recogniser and return its memory to the system (issue 38: a
+        closed session's ~30 MB stayed with the server)."""
+        if live is None:
+            return
+        try:
+            await asyncio.get_running_loop().run_in_executor(self.server.executor, live.close)
+        except RuntimeError:  # the server is shutting down: its pool takes no more work
+            live.close()
 
     # ------------------------------------------------------------------ input
     async def _read(self) -> None:
@@ -175,7 +187,8 @@ class LiveSession:
                     raise protocol.ProtocolError("config: fps can only change before the first push")
                 self.fps, renew = msg.fps, True
             if renew:
-                self.live = None
+                old, self.live = self.live, None
+                await self._release(old)
                 self._animator()
             if prepare or (renew and self.audio_rate is not None):
                 # load the recogniser now (~0.5 s), not when the first audio is due
