@@ -22,7 +22,7 @@ from lipsync._data import default_bank_dir
 from lipsync.errors import InputError
 from lipsync.live import LiveAnimator
 from lipsync.live.audio import RATE
-from lipsync.pipeline.liveclip import live_specs
+from lipsync.pipeline.liveclip import live_shapes, live_specs
 from lipsync.server.protocol import HEADER, ProtocolError, parse
 from lipsync.speech.audio import load_audio
 
@@ -129,6 +129,7 @@ def srv():
 
 def test_end_sends_every_remaining_frame_then_says_so(srv, clip):
     expected = live_specs(clip, srv.server.bank)
+    cues = live_shapes(clip, srv.server.bank)
 
     async def run():
         async with await _connect(srv) as ws:
@@ -153,7 +154,7 @@ def test_end_sends_every_remaining_frame_then_says_so(srv, clip):
                     continue
                 m = json.loads(msg)
                 if m["type"] == "spec":
-                    specs[m["n"]] = (m["from"], m["to"], m["alpha"])
+                    specs[m["n"]] = (m["from"], m["to"], m["alpha"], m["cue"])
                 elif m["type"] == "error":
                     errors.append(m)
                 elif m["type"] == "end":
@@ -175,6 +176,7 @@ def test_end_sends_every_remaining_frame_then_says_so(srv, clip):
     for n in frames[-6:]:
         s = expected[n]
         assert specs[n][:2] == (s.from_viseme, s.to_viseme) and specs[n][2] == pytest.approx(s.alpha, abs=1e-6)
+        assert specs[n][3] == cues[n]
     texts = [e["error"] for e in errors]
     assert [e["type"] for e in errors] == ["error"] * 4, errors
     assert "no audio has been streamed" in texts[0]

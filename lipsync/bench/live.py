@@ -510,7 +510,7 @@ def _events_delay(ctx: Context, rows: List[dict]) -> None:
 # --- live cues and the end of a stream (issue 36), serve's memory (issue 38) ------------------
 
 #: Look-aheads of the live cue figure, seconds.
-CUE_LOOKAHEADS = (0.06, 0.1, 0.14, 0.2, 0.3, 0.4)
+CUE_LOOKAHEADS = (0.06, 0.1, 0.2, 0.4)
 
 
 def _cli_cue_frames(args, n: int, out: "os.PathLike[str]") -> np.ndarray:

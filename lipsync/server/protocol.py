@@ -5,8 +5,9 @@ Client -> server, text frames holding one JSON object each:
 * ``{"type": "config", "fps": 25, "format": "jpeg"|"webp", "quality": 80}`` (optional,
   before anything else is pushed); for audio also ``"audio_rate": 48000`` (Hz, before the
   first audio), ``"lookahead": 200`` (ms, the audio look-ahead, before the first audio) and
-  ``"specs": true`` (a ``{"type": "spec", "n", "from", "to", "alpha"}`` text message before
-  each frame: what it shows, for checking);
+  ``"specs": true`` (a ``{"type": "spec", "n", "from", "to", "alpha", "cue"}`` text message
+  before each frame: what it shows, for checking, and its mouth shape as a cue,
+  :meth:`lipsync.LiveAnimator.cue`);
 * binary frames: audio, 16-bit little-endian PCM mono at ``audio_rate`` (at most
   :data:`MAX_AUDIO_MESSAGE_S` per message, in real time: at most
   :data:`MAX_AUDIO_AHEAD_S` ahead of the wall clock since the first). Audio is the session's

@@ -260,7 +260,7 @@ class LiveSession:
         if self.specs:
             spec = live.spec(n)
             await self.ws.send_json({"type": "spec", "n": n, "from": spec.from_viseme, "to": spec.to_viseme,
-                                     "alpha": round(float(spec.alpha), 6)})
+                                     "alpha": round(float(spec.alpha), 6), "cue": live.cue(n)})
         await self.ws.send_bytes(data)
         self.last_sent = n
         self.frames_sent += 1
