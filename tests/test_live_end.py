@@ -184,3 +184,15 @@ def test_end_sends_every_remaining_frame_then_says_so(srv, clip):
     assert "already ended" in texts[2]
     assert "has ended" in texts[3]
     assert pong == {"type": "pong"}
+
+
+def test_the_live_modules_examples_run():
+    """The docstring examples of the modules this round changed (finish_audio, cue, close,
+    shared_plate, the end message) run and give what they show."""
+    import doctest
+    import importlib
+
+    for name in ("lipsync.live.animator", "lipsync.live.causal", "lipsync.live.pool", "lipsync.live.audio",
+                 "lipsync.pipeline.liveclip", "lipsync.server.protocol"):
+        result = doctest.testmod(importlib.import_module(name))
+        assert result.failed == 0 and result.attempted > 0, name
