@@ -123,3 +123,59 @@ def test_the_plate_is_decoded_once_and_shared(bank):
     assert not a.plate.frames.flags.writeable           # shared pixels cannot be drawn on by mistake
     # a transparent or plate-less bank has none
     assert LiveAnimator(default_bank_dir(), prepare=False).plate is None
+
+
+def test_a_serve_session_of_grid_s1_sends_the_plate_frames(speech):
+    """`lipsync serve --bank visemes/grid-s1`: an audio session's JPEG frames are the
+    LiveAnimator's plate frames (within JPEG's error), the last look-ahead's included."""
+    import asyncio
+
+    from lipsync.server.protocol import HEADER
+    from test_serve import Running, _connect
+
+    pcm = speech[0][:int(1.6 * RATE)]
+    srv = Running(bank=str(GRID_BANK), max_sessions=2, idle_timeout=30)
+    try:
+        assert srv.server.plate is not None and srv.server.plate is shared_plate(srv.server.bank)
+
+        async def run():
+            got = {}
+            async with await _connect(srv) as ws:
+                await ws.recv()
+                await ws.send(json.dumps({"type": "config", "audio_rate": 16000}))
+                await ws.recv()
+                for i in range(0, len(pcm), 8000):          # half-second messages
+                    await ws.send(pcm[i:i + 8000].astype("<i2").tobytes())
+                await ws.send(json.dumps({"type": "end"}))
+                while True:
+                    msg = await asyncio.wait_for(ws.recv(), 30)
+                    if isinstance(msg, bytes):
+                        n = HEADER.unpack(msg[:HEADER.size])[0]
+                        bgr = cv2.imdecode(np.frombuffer(msg[HEADER.size:], np.uint8), cv2.IMREAD_COLOR)
+                        got[n] = cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
+                    else:
+                        m = json.loads(msg)
+                        assert m["type"] != "error", m
+                        if m["type"] == "end":
+                            return got
+
+        got = asyncio.run(run())
+    finally:
+        srv.stop()
+    live = LiveAnimator(Bank.load(GRID_BANK), fps=25, prepare=False)
+    for i in range(0, len(pcm), BLOCK):
+        live.feed_audio(pcm[i:i + BLOCK], RATE)
+    live.finish_audio()
+    assert max(got) == 39                              # 1.6 s: frames 0-39, the last ones included
+    for n, rgb in got.items():
+        want = live.frame(n)
+        assert np.abs(rgb.astype(int) - want).mean() < 2.5, n          # JPEG at quality 80
+    # the plate's blink (plate frames 46-48 of the 75: output frames 46-48) is not in 1.6 s;
+    # its motion is: consecutive frames differ above the nose as the plate's do
+    mesh = np.asarray(json.loads((GRID_BANK / "plate.json").read_text())["rest_mesh"], np.float64)
+    rows = above_nose_rows(mesh) - 3
+    ns = sorted(got)[-10:]
+    plate = live.plate
+    theirs = above_nose_changes([plate.frames[plate.index(n, 25.0)] for n in ns], rows)
+    ours = above_nose_changes([got[n] for n in ns], rows)
+    assert np.corrcoef(ours, theirs)[0, 1] > 0.5 and theirs.mean() > 0.3
