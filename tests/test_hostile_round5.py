@@ -74,3 +74,124 @@ def test_a_job_stuck_in_planning_is_stopped_at_its_timeout_and_the_next_one_runs
         handle.stop()
         server.close()
         session.close()
+
+
+# --- item 4: an output that is one of the inputs is refused, in every command that writes ---
+
+import hashlib
+import os
+import shutil
+import subprocess
+
+import imageio_ffmpeg
+
+from lipsync.cli import main as cli_main
+
+TOON = ROOT / "visemes" / "toon"
+
+
+def _digest(path):
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+
+
+def _run(argv, capsys):
+    code = cli_main([str(a) for a in argv])
+    return code, capsys.readouterr().err
+
+
+def _linked(tmp_path, src, how):
+    """``src`` and the name the output is given: the same name, a hard link or a symbolic link to it."""
+    if how == "same":
+        return src
+    link = tmp_path / f"link-{how}{src.suffix}"
+    (os.link if how == "hard" else os.symlink)(src, link)
+    return link
+
+
+@pytest.fixture
+def audio_mp4(tmp_path):
+    out = tmp_path / "speech.mp4"
+    subprocess.run([imageio_ffmpeg.get_ffmpeg_exe(), "-v", "error", "-i", str(ROOT / "samples" / "hello.wav"),
+                    "-c:a", "aac", str(out)], check=True)
+    return out
+
+
+@pytest.mark.parametrize("how", ["same", "hard", "symlink"])
+def test_render_output_over_its_audio_is_refused(tmp_path, audio_mp4, how, capsys):
+    before = _digest(audio_mp4)
+    out = _linked(tmp_path, audio_mp4, how)
+    code, err = _run(["render", ROOT / "samples" / "hello.phn", "--audio", audio_mp4, "-o", out,
+                      "--method", "dissolve", "-q"], capsys)
+    assert code == 2 and "is the input" in err and str(audio_mp4) in err
+    assert _digest(audio_mp4) == before
+
+
+def test_render_audio_input_as_its_own_output_is_refused(audio_mp4, capsys):
+    before = _digest(audio_mp4)
+    code, err = _run(["render", audio_mp4, "-o", audio_mp4, "-q"], capsys)
+    assert code == 2 and "is the input" in err and _digest(audio_mp4) == before
+
+
+@pytest.mark.parametrize("how", ["same", "symlink"])
+def test_dub_output_over_its_video_is_refused(tmp_path, audio_mp4, how, capsys):
+    video = tmp_path / "same.mp4"
+    shutil.copy(audio_mp4, video)   # refused before it is opened: any file shows the rule
+    before = _digest(video)
+    code, err = _run(["dub", video, "--audio", ROOT / "samples" / "hello.wav", "-o", _linked(tmp_path, video, how)],
+                     capsys)
+    assert code == 2 and "is the input" in err and _digest(video) == before
+
+
+def test_dub_api_refuses_too(tmp_path, audio_mp4):
+    import lipsync
+    from lipsync.errors import InputError
+
+    with pytest.raises(InputError, match="is the input"):
+        lipsync.dub(audio_mp4, ROOT / "samples" / "hello.wav", audio_mp4)
+
+
+def test_cues_output_over_its_timeline_is_refused(tmp_path, capsys):
+    src = tmp_path / "cues.json"
+    shutil.copy(ROOT / "samples" / "hello.json", src)
+    before = _digest(src)
+    for how in ("same", "hard"):
+        code, err = _run(["cues", src, "--format", "rhubarb-json", "-o", _linked(tmp_path, src, how)], capsys)
+        assert code == 2 and "is the input" in err and _digest(src) == before
+
+
+def test_align_output_over_its_transcript_is_refused(tmp_path, capsys):
+    script = tmp_path / "script.TextGrid"
+    script.write_text("hello world\n")
+    code, err = _run(["align", ROOT / "samples" / "hello.wav", "--text", script, "-o", script, "-q"], capsys)
+    assert code == 2 and "is the input" in err and script.read_text() == "hello world\n"
+
+
+def test_atlas_json_beside_the_output_over_its_timeline_is_refused(tmp_path, capsys):
+    src = tmp_path / "atlas.json"
+    shutil.copy(ROOT / "samples" / "hello.json", src)
+    before = _digest(src)
+    code, err = _run(["atlas", "--bank", "toon", src, "-o", tmp_path / "atlas.png"], capsys)
+    assert code == 2 and "is the input" in err and _digest(src) == before
+
+
+@pytest.mark.parametrize("command", [["morph", "BANK", "A", "D", "--alpha", "0.5"], ["preview", "BANK"],
+                                     ["atlas", "BANK"]])
+def test_an_output_over_a_bank_picture_is_refused(tmp_path, command, capsys):
+    bank = tmp_path / "bank"
+    shutil.copytree(TOON, bank)
+    before = _digest(bank / "A.png")
+    argv = [bank if a == "BANK" else a for a in command]
+    code, err = _run(argv + ["-o", bank / "A.png"], capsys)
+    assert code == 2 and "is a file of the bank" in err and _digest(bank / "A.png") == before
+
+
+def test_batch_row_whose_output_is_its_input_is_refused(tmp_path, audio_mp4, capsys):
+    outdir = tmp_path / "out"
+    outdir.mkdir()
+    shutil.copy(audio_mp4, outdir / "speech.mp4")
+    before = _digest(outdir / "speech.mp4")
+    manifest = tmp_path / "clips.csv"
+    manifest.write_text(f"input,output\n{outdir / 'speech.mp4'},speech.mp4\n")
+    code, err = _run(["batch", manifest, "-o", outdir], capsys)
+    assert code == 2 and "is the input" in err and "clips.csv:2:" in err
+    assert _digest(outdir / "speech.mp4") == before

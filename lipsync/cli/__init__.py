@@ -112,6 +112,9 @@ def main(argv: Optional[List[str]] = None) -> int:
     try:
         if getattr(args, "allow_mismatch", True) is False:
             warnings.filterwarnings("error", category=TranscriptMismatch)
+        from ._common import check_outputs_apart
+
+        check_outputs_apart(args)   # an output never replaces an input (issue 38)
         return int(func(args) or 0)
     except InputError as exc:
         print(f"lipsync: error: {exc}", file=sys.stderr)

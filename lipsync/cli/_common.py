@@ -24,6 +24,48 @@ from ..motion.timing import DEFAULT_CURVE, timing_names
 DEFAULT_MOHO_FPS = 24.0
 
 
+#: argparse attributes that name a command's input files (a list for nargs options); a
+#: ``text`` or ``map`` counts when it names a file. ``bank`` folders are inputs as wholes.
+_INPUT_ARGS = ("timeline", "timelines", "audio", "video", "text", "video_text", "map", "manifest", "atlas", "folder")
+_BANK_ARGS = ("bank", "bank_option")
+#: the attribute naming a command's output, and the files a command writes beside it
+_OUTPUT_ARG = "output"
+_BESIDE_OUTPUT = {"atlas": (".json",)}
+
+
+def check_outputs_apart(args: argparse.Namespace) -> None:
+    """Refuse (InputError, exit 2) an output that is one of the command's inputs, before any work.
+
+    Every command that writes goes through here (``lipsync.cli.main`` calls it): the output,
+    and what the command writes beside it, against every input file and the bank's folder,
+    by inode (:func:`lipsync._files.refuse_output_over_input`).
+
+    Examples
+    --------
+    >>> import argparse, os, tempfile
+    >>> d = tempfile.mkdtemp(); p = os.path.join(d, "a.phn"); _ = open(p, "w").write("0 1 aa")
+    >>> check_outputs_apart(argparse.Namespace(timeline=p, output=os.path.join(d, "a.mp4")))
+    >>> check_outputs_apart(argparse.Namespace(timeline=p, output=p))   # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    lipsync.errors.InputError: ...a.phn: is the input ...a.phn (the same file); write the output to another name
+    """
+    from .._files import refuse_output_over_input
+
+    inputs = []
+    for name in _INPUT_ARGS:
+        value = getattr(args, name, None)
+        for v in value if isinstance(value, (list, tuple)) else [value]:
+            if isinstance(v, str) and v and len(v) < 4096 and "\0" not in v:
+                inputs.append(v)
+    out = getattr(args, _OUTPUT_ARG, None)
+    if not isinstance(out, str) or not out:
+        return
+    outputs = [out] + [os.path.splitext(out)[0] + ext for ext in _BESIDE_OUTPUT.get(getattr(args, "command", ""), ())]
+    banks = [getattr(args, name, None) for name in _BANK_ARGS]
+    inputs += [b for b in banks if isinstance(b, str) and os.path.isfile(b)]   # atlas's first positional
+    refuse_output_over_input(outputs, inputs, folders=[b for b in banks if isinstance(b, str)])
+
+
 def add_bank_option(parser: argparse.ArgumentParser) -> None:
     """``--bank DIR_OR_NAME``: the subject (default: the shipped toon)."""
     parser.add_argument("--bank", default=None, metavar="DIR_OR_NAME",
