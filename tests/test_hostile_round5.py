@@ -195,3 +195,73 @@ def test_batch_row_whose_output_is_its_input_is_refused(tmp_path, audio_mp4, cap
     code, err = _run(["batch", manifest, "-o", outdir], capsys)
     assert code == 2 and "is the input" in err and "clips.csv:2:" in err
     assert _digest(outdir / "speech.mp4") == before
+
+
+# --- item 1: transcripts have a size limit; warnings never echo a huge word ------------------
+
+import warnings
+
+from lipsync.speech.text import MAX_TRANSCRIPT_CHARS, shown_words
+
+
+def test_a_transcript_file_over_the_limit_is_refused_with_exit_2(tmp_path, capsys):
+    big = tmp_path / "script.txt"
+    big.write_text(("hello world " * (MAX_TRANSCRIPT_CHARS // 12 + 2)))
+    assert len(big.read_text()) > MAX_TRANSCRIPT_CHARS
+    code, err = _run(["align", ROOT / "samples" / "hello.wav", "--text", big, "-o", tmp_path / "o.TextGrid", "-q"],
+                     capsys)
+    assert code == 2 and "script.txt: transcript is over 100,000 characters" in err
+    assert not (tmp_path / "o.TextGrid").exists()
+
+
+def test_a_literal_transcript_over_the_limit_is_refused_by_the_api_too():
+    import numpy as np
+    from lipsync.errors import InputError
+    from lipsync.speech.align import align_samples
+
+    with pytest.raises(InputError, match="over 100,000 characters"):
+        align_samples(np.zeros(1600, np.int16), "a" * (MAX_TRANSCRIPT_CHARS + 1))
+
+
+def test_a_huge_unknown_word_is_cut_in_the_warning():
+    import numpy as np
+    from lipsync.speech.align import align_samples
+
+    word = "zq" * 20_000                      # 40,000 characters: one "word" of letters
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        align_samples(np.zeros(1600, np.int16), f"hello {word}")
+    texts = [str(w.message) for w in caught if "dictionary" in str(w.message)]
+    assert texts and all(len(t) < 400 for t in texts), [len(t) for t in texts]
+    assert "zqzq" in texts[0] and "\u2026" in texts[0]
+
+
+def test_shown_words_cuts_and_counts():
+    assert shown_words(["x" * 100] + ["y"] * 10, limit=2, width=10) == "x" * 9 + "\u2026, y and 9 more"
+
+
+# --- item 13: --text naming a device, mixed scripts, emoji-only --------------------------------
+
+@pytest.mark.parametrize("device", ["/dev/zero", "/dev/null", "/dev/stdin"])
+def test_text_naming_a_device_is_exit_2(tmp_path, device, capsys):
+    code, err = _run(["align", ROOT / "samples" / "hello.wav", "--text", device, "-o", tmp_path / "o.TextGrid",
+                      "-q"], capsys)
+    assert code == 2 and f"{device}: is not a regular file" in err
+
+
+def test_mixed_scripts_are_named_each():
+    from lipsync.speech.scripts import UnreadWordsWarning, check_english_script
+
+    with pytest.warns(UnreadWordsWarning) as record:
+        check_english_script("hello 你好 world مرحبا", ["hello", "world"])
+    message = str(record[0].message)
+    assert "Chinese (Han) and Arabic letters" in message and "Cyrillic" not in message
+    assert "--lang zh or --lang ar" in message
+
+
+def test_an_emoji_only_transcript_is_exit_2(tmp_path, capsys):
+    script = tmp_path / "emoji.txt"
+    script.write_text("\U0001F600 \U0001F44D \U0001F389\n")
+    code, err = _run(["align", ROOT / "samples" / "hello.wav", "--text", script, "-o", tmp_path / "o.TextGrid",
+                      "-q"], capsys)
+    assert code == 2 and "the transcript has no words to say" in err
