@@ -265,3 +265,57 @@ def test_an_emoji_only_transcript_is_exit_2(tmp_path, capsys):
     code, err = _run(["align", ROOT / "samples" / "hello.wav", "--text", script, "-o", tmp_path / "o.TextGrid",
                       "-q"], capsys)
     assert code == 2 and "the transcript has no words to say" in err
+
+
+# --- item 12: IPA timelines: a mark never turns an IPA letter into ARPAbet ---------------------
+
+from lipsync.phonetics import detect
+from lipsync.phonetics.features import FEATURES
+from lipsync.phonetics.phonemes import load_map
+from lipsync.phonetics.segments import parse
+from lipsync.phonetics.visemes import label_visemes
+
+MARKS = ["", "ː", "ˑ", "\u0303", "\u0325", "\u0329", "\u032f", "\u0308", "ʲ", "ʷ", "ʰ", "ːʲ"]
+
+
+@pytest.mark.parametrize("map_name", ["rhubarb", "english-to-oculus"])
+def test_every_ipa_letter_with_and_without_marks_follows_the_rules(map_name):
+    pmap = load_map(map_name)
+    rules = pmap._compiled_rules
+    aliases = pmap._phoneset.aliases if pmap._phoneset is not None else {}
+    checked, wrong = 0, []
+    for letter in FEATURES:
+        bare = pmap.targets(letter, notation="ipa")
+        # the English phone set reads a few IPA letters its own way (MFA English's ɜ is NURSE,
+        # ER): then the marked letter must read as the bare one does
+        english_reading = bare != label_visemes(letter, rules)
+        for mark in MARKS:
+            label = letter + mark
+            if parse(label) is None or (mark and label in aliases):
+                continue
+            want = bare if english_reading else label_visemes(label, rules)
+            got = pmap.targets(label, notation="ipa")
+            checked += 1
+            if got != want:
+                wrong.append((label, got, want))
+    assert checked > 1000 and wrong == []
+
+
+@pytest.mark.parametrize("label,visemes", [("y", ["F"]), ("yː", ["F"]), ("yˑ", ["F"]), ("ỹː", ["F"]),
+                                           ("ɑːɹ", ["D", "E"]), ("ʲ", ["B"]), ("ʷ", ["F"])])
+def test_the_issues_labels(label, visemes):
+    pmap = load_map("rhubarb")
+    assert detect(["sil", label, "a"]) == "ipa"
+    assert pmap.targets(label, notation=detect(["sil", label, "a"])) == visemes
+    assert pmap.targets(label, notation="ipa") != [pmap.fallback] or visemes == [pmap.fallback]
+
+
+def test_a_german_textgrid_with_long_y_shows_rounded_lips(tmp_path):
+    # MFA's German "über": y: is the rounded vowel (F), not ARPAbet Y (B) for its whole length
+    from lipsync.phonetics.phonemes import map_timeline
+    from lipsync.motion.timeline import Segment, Timeline
+
+    tl = Timeline((Segment(0, 0.1, "ʔ"), Segment(0.1, 0.3, "yː"), Segment(0.3, 0.4, "b"), Segment(0.4, 0.5, "ɐ")),
+                  kind="phoneme")
+    out = map_timeline(tl, load_map("rhubarb"), rest="X")
+    assert [s.label for s in out if 0.1 <= s.start < 0.3] == ["F"]
