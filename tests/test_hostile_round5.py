@@ -319,3 +319,37 @@ def test_a_german_textgrid_with_long_y_shows_rounded_lips(tmp_path):
                   kind="phoneme")
     out = map_timeline(tl, load_map("rhubarb"), rest="X")
     assert [s.label for s in out if 0.1 <= s.start < 0.3] == ["F"]
+
+
+# --- item 13: an output folder that cannot take the file is exit 2 naming it -----------------
+
+LONG_NAME = "n" * 250 + ".mp4"
+
+
+@pytest.mark.parametrize("argv", [["render", ROOT / "samples" / "hello.phn", "-q"],
+                                  ["dub", ROOT / "samples" / "hello.wav", "--audio", ROOT / "samples" / "hello.wav"],
+                                  ["blender-addon"]])
+def test_an_output_name_too_long_is_exit_2_naming_it(tmp_path, argv, capsys):
+    out = tmp_path / (LONG_NAME if argv[0] != "blender-addon" else LONG_NAME.replace(".mp4", ".zip"))
+    code, err = _run(argv + ["-o", out], capsys)
+    assert code == 2 and "the file name is too long" in err and "nnnn" in err
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.skipif(os.geteuid() == 0, reason="root writes into a mode-555 folder; the check is os.access + a probe")
+@pytest.mark.parametrize("argv", [["render", ROOT / "samples" / "hello.phn", "-q"], ["blender-addon"]])
+def test_a_read_only_output_folder_is_exit_2_naming_it(tmp_path, argv, capsys):
+    folder = tmp_path / "ro"
+    folder.mkdir()
+    folder.chmod(0o555)
+    code, err = _run(argv + ["-o", folder / "out.zip" if argv[0] == "blender-addon" else folder / "out.mp4"], capsys)
+    folder.chmod(0o755)
+    assert code == 2 and "cannot write here" in err and str(folder) in err
+
+
+@pytest.mark.parametrize("argv", [["render", ROOT / "samples" / "hello.phn", "--audio", "/dev/stdin"],
+                                  ["dub", ROOT / "samples" / "hello.wav", "--audio", "/dev/stdin"],
+                                  ["align", "/dev/stdin"]])
+def test_dev_stdin_as_an_input_is_exit_2(tmp_path, argv, capsys, monkeypatch):
+    code, err = _run(argv + ["-o", tmp_path / "out.mp4"], capsys)
+    assert code == 2 and "/dev/stdin: is a device, pipe or stream, not a file" in err

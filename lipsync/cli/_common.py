@@ -57,13 +57,62 @@ def check_outputs_apart(args: argparse.Namespace) -> None:
         for v in value if isinstance(value, (list, tuple)) else [value]:
             if isinstance(v, str) and v and len(v) < 4096 and "\0" not in v:
                 inputs.append(v)
+    for path in inputs:
+        _refuse_special_file(path)
     out = getattr(args, _OUTPUT_ARG, None)
     if not isinstance(out, str) or not out:
         return
+    _check_writable(out)
     outputs = [out] + [os.path.splitext(out)[0] + ext for ext in _BESIDE_OUTPUT.get(getattr(args, "command", ""), ())]
     banks = [getattr(args, name, None) for name in _BANK_ARGS]
     inputs += [b for b in banks if isinstance(b, str) and os.path.isfile(b)]   # atlas's first positional
     refuse_output_over_input(outputs, inputs, folders=[b for b in banks if isinstance(b, str)])
+
+
+#: Where a path names a device or a process's stream rather than a file: ``--audio
+#: /dev/stdin`` passed the "is a file" check (a redirected stdin is a link to the file) and
+#: then failed inside ffmpeg with exit 1 and its raw log (issue 38).
+_SPECIAL_ROOTS = ("/dev/", "/proc/")
+#: Characters the temporary name adds to OUT's (``.OUT.partial-PID-XXXXXXXX.ext``, lipsync._files).
+_PARTIAL_NAME_EXTRA = 32
+
+
+def _refuse_special_file(path: str) -> None:
+    from ..errors import InputError
+
+    if not os.path.exists(path):
+        return
+    real = os.path.realpath(path)
+    if any(p.startswith(_SPECIAL_ROOTS) for p in (os.path.abspath(path), real)) or not (
+            os.path.isfile(real) or os.path.isdir(real)):
+        raise InputError("is a device, pipe or stream, not a file: save the data to a file and give its name",
+                         path=path)
+
+
+def _check_writable(out: str) -> None:
+    """The output's folder exists and takes a file of that name (exit 2 naming OUT, not errno text at the end)."""
+    from ..errors import InputError
+
+    folder = os.path.dirname(os.path.abspath(out)) or "."
+    if not os.path.isdir(folder):
+        return   # the commands say so themselves (some make the folder)
+    try:
+        name_max = os.pathconf(folder, "PC_NAME_MAX")
+    except (OSError, ValueError):
+        name_max = 255
+    if len(os.fsencode(os.path.basename(out))) + _PARTIAL_NAME_EXTRA > name_max:
+        raise InputError(f"the file name is too long ({len(os.path.basename(out))} characters; at most "
+                         f"{name_max - _PARTIAL_NAME_EXTRA} here)", path=out)
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise InputError(f"cannot write here: the folder {folder} is not writable", path=out)
+    import tempfile
+
+    try:   # a read-only file system says so only when written to (os.access is True for root)
+        fd, probe = tempfile.mkstemp(dir=folder, prefix=".lipsync-probe-")
+    except OSError as exc:
+        raise InputError(f"cannot write here: the folder {folder}: {exc.strerror or exc}", path=out) from None
+    os.close(fd)
+    os.unlink(probe)
 
 
 def add_bank_option(parser: argparse.ArgumentParser) -> None:
