@@ -353,3 +353,20 @@ def test_a_read_only_output_folder_is_exit_2_naming_it(tmp_path, argv, capsys):
 def test_dev_stdin_as_an_input_is_exit_2(tmp_path, argv, capsys, monkeypatch):
     code, err = _run(argv + ["-o", tmp_path / "out.mp4"], capsys)
     assert code == 2 and "/dev/stdin: is a device, pipe or stream, not a file" in err
+
+
+# --- item 13: an unknown --lang names the closest few; `lipsync languages` lists all ----------
+
+def test_unknown_language_names_the_closest_codes_and_lipsync_languages_lists_all(tmp_path, capsys):
+    from lipsync.phonetics.g2p import espeak_available, languages
+
+    if not espeak_available():
+        pytest.skip("the espeak-ng extra is not installed")
+    with pytest.raises(SystemExit) as exit_:
+        cli_main(["align", str(ROOT / "samples" / "hello.wav"), "--lang", "german", "-o", str(tmp_path / "x.TextGrid")])
+    err = capsys.readouterr().err
+    assert exit_.value.code == 2 and "did you mean de (German)" in err and "`lipsync languages`" in err
+    assert len(err) < 600 and "zh" not in err.split("did you mean")[1]
+    assert cli_main(["languages"]) == 0
+    listed = [line.split("\t") for line in capsys.readouterr().out.splitlines()]
+    assert dict(listed) == languages() and len(listed) > 100

@@ -36,6 +36,7 @@ _COMMAND_MODULES = [
     "morph",
     "serve",
     "batch",
+    "languages",
     "blender_addon",  # `lipsync blender-addon`: a command's dashes are underscores in its module name
 ]
 
