@@ -370,3 +370,18 @@ def test_unknown_language_names_the_closest_codes_and_lipsync_languages_lists_al
     assert cli_main(["languages"]) == 0
     listed = [line.split("\t") for line in capsys.readouterr().out.splitlines()]
     assert dict(listed) == languages() and len(listed) > 100
+
+
+# --- item 13: a transcript that does not fit stops without saying it went on --------------------
+
+def test_a_mismatched_transcript_says_it_stopped_not_that_it_went_on(tmp_path, capsys):
+    from lipsync.phonetics.g2p import espeak_available
+
+    if not espeak_available():
+        pytest.skip("the espeak-ng extra is not installed")
+    code, err = _run(["align", ROOT / "samples" / "hello.wav", "--text", "こんにちは、元気ですか", "--lang", "es",
+                      "-o", tmp_path / "x.TextGrid", "-q"], capsys)
+    assert code == 2 and "does not fit the audio" in err
+    assert "were used instead" not in err and "were left out" not in err
+    assert "stopped, nothing written" in err and "--allow-mismatch goes on" in err
+    assert not (tmp_path / "x.TextGrid").exists()

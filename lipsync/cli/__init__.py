@@ -121,7 +121,8 @@ def main(argv: Optional[List[str]] = None) -> int:
         print(f"lipsync: error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except TranscriptMismatch as exc:
-        print(f"lipsync: error: {exc}; if it is the right transcript, --allow-mismatch goes on",
+        print(f"lipsync: error: {exc}; stopped, nothing written: if it is the right transcript, "
+              f"--allow-mismatch goes on",
               file=sys.stderr)
         return EXIT_BAD_INPUT
     except KeyboardInterrupt:

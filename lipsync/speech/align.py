@@ -1186,12 +1186,17 @@ def _align_pcm(pcm: np.ndarray, transcript: Tuple[str, ...], *, quiet: bool, pat
         if (failed or strict_failed or len(skipped) > SKIPPED_SHARE_OK * len(transcript)
                 or confidence < LOW_CONFIDENCE):
             what = "does not fit the audio"
+            mismatch = confidence < NO_FIT_CONFIDENCE and (failed or skipped)
             if skipped:
-                what += (f": {len(skipped)} of its {len(transcript)} words were not found and were left out "
-                         f"({_some([show(w) for w in skipped])})")
+                what += (f": {len(skipped)} of its {len(transcript)} words were not found "
+                         + ("(going on leaves them out: " if mismatch else "and were left out (")
+                         + f"{_some([show(w) for w in skipped])})")
             if failed:
+                # a mismatch stops the command line (exit 2) unless --allow-mismatch: say what
+                # going on does, not that it was done (issue 38)
                 what += (f"{',' if skipped else ':'} {failed} of its {len(transcript)} words could not be "
-                         "aligned, and the words recognised there were used instead")
+                         + ("aligned (going on uses the words recognised there instead)" if mismatch else
+                            "aligned, and the words recognised there were used instead"))
             if not (failed or skipped):
                 what = "fits the audio poorly; the alignment is a best effort"
             warnings.warn(f"{path or 'audio'}: the transcript {what} (confidence {confidence:.2f}: the "
@@ -1199,8 +1204,7 @@ def _align_pcm(pcm: np.ndarray, transcript: Tuple[str, ...], *, quiet: bool, pat
                           "and how well they match the sounds)",
                           # all its words found but little of the speech covered: a partial
                           # transcript, worth aligning; words not found as well: the wrong one
-                          TranscriptMismatchWarning if confidence < NO_FIT_CONFIDENCE and (failed or skipped)
-                          else AlignmentWarning,
+                          TranscriptMismatchWarning if mismatch else AlignmentWarning,
                           stacklevel=3)
     return _to_alignment(timings, duration, path, transcript if has_text else tuple(w for w, *_ in timings),
                          recognised=not has_text or failed > 0, confidence=confidence, missing=missing,
