@@ -385,3 +385,12 @@ def test_a_mismatched_transcript_says_it_stopped_not_that_it_went_on(tmp_path, c
     assert "were used instead" not in err and "were left out" not in err
     assert "stopped, nothing written" in err and "--allow-mismatch goes on" in err
     assert not (tmp_path / "x.TextGrid").exists()
+
+
+# --- item 13: no text names a folder only this workspace has ------------------------------------
+
+def test_no_source_or_data_readme_names_an_absolute_workspace_folder():
+    files = [*(ROOT / "lipsync").rglob("*.py"), *(ROOT / "tests" / "data").rglob("README*"), *(ROOT / "docs").glob("*.md"),
+             ROOT / "README.md"]
+    named = [str(f.relative_to(ROOT)) for f in files if "/work/" in f.read_text(encoding="utf-8", errors="replace")]
+    assert named == []
