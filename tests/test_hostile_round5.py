@@ -246,7 +246,12 @@ def test_shown_words_cuts_and_counts():
 def test_text_naming_a_device_is_exit_2(tmp_path, device, capsys):
     code, err = _run(["align", ROOT / "samples" / "hello.wav", "--text", device, "-o", tmp_path / "o.TextGrid",
                       "-q"], capsys)
-    assert code == 2 and f"{device}: is not a regular file" in err
+    assert code == 2 and f"{device}: is a device, pipe or stream, not a file" in err
+    from lipsync.errors import InputError
+    from lipsync.speech.align import read_transcript
+
+    with pytest.raises(InputError, match="is not a regular file"):   # the API's reading of --text too
+        read_transcript(device)
 
 
 def test_mixed_scripts_are_named_each():

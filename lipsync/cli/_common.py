@@ -28,6 +28,9 @@ DEFAULT_MOHO_FPS = 24.0
 #: ``text`` or ``map`` counts when it names a file. ``bank`` folders are inputs as wholes.
 _INPUT_ARGS = ("timeline", "timelines", "audio", "video", "text", "video_text", "map", "manifest", "atlas", "folder")
 _BANK_ARGS = ("bank", "bank_option")
+#: Inputs that must be files: ffmpeg seeks in media and reads it more than once, and a
+#: transcript is read whole (timelines may come from a pipe: their readers bound the size).
+_FILE_ONLY_ARGS = ("audio", "video", "text", "video_text")
 #: the attribute naming a command's output, and the files a command writes beside it
 _OUTPUT_ARG = "output"
 _BESIDE_OUTPUT = {"atlas": (".json",)}
@@ -57,8 +60,11 @@ def check_outputs_apart(args: argparse.Namespace) -> None:
         for v in value if isinstance(value, (list, tuple)) else [value]:
             if isinstance(v, str) and v and len(v) < 4096 and "\0" not in v:
                 inputs.append(v)
-    for path in inputs:
-        _refuse_special_file(path)
+    for name in _FILE_ONLY_ARGS:
+        value = getattr(args, name, None)
+        for v in value if isinstance(value, (list, tuple)) else [value]:
+            if isinstance(v, str) and v in inputs:
+                _refuse_special_file(v)
     out = getattr(args, _OUTPUT_ARG, None)
     if not isinstance(out, str) or not out:
         return
