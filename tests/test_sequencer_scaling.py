@@ -139,3 +139,26 @@ def test_plan_segments_takes_the_array_path_on_long_tracks(monkeypatch):
     arrays = plan_segments(tl, rest=REST, closures=("P",))
     monkeypatch.setattr(sequencer, "ARRAY_PLAN_FROM", 10 ** 9)
     assert arrays == plan_segments(tl, rest=REST, closures=("P",))
+
+
+def test_json_array_lines_counted_on_equal_counting_from_the_start():
+    # the reader's element lines (for messages) are counted on from the element before
+    # (counting from the start for each element made a 40,000-cue Rhubarb JSON quadratic)
+    import json
+
+    from lipsync.readers._common import json_array_lines
+
+    rng = random.Random(3)
+    cues = [{"start": i / 100, "end": (i + 1) / 100, "value": "AB"[i % 2]} for i in range(300)]
+    text = json.dumps({"mouthCues": cues}, indent=rng.choice([1, 2, 4]))
+    text = text.replace("},", "},\n" * rng.randint(0, 2))   # blank lines between some elements
+    pos = text.index("[") + 1
+    starts, depth, naive = [], 0, []
+    for i, ch in enumerate(text[pos:], pos):   # the naive count: each element's first "{"
+        if ch == "{":
+            if depth == 0:
+                naive.append(text.count("\n", 0, i) + 1)
+            depth += 1
+        elif ch == "}":
+            depth -= 1
+    assert json_array_lines(text, "mouthCues") == naive
