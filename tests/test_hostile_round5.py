@@ -341,15 +341,27 @@ def test_an_output_name_too_long_is_exit_2_naming_it(tmp_path, argv, capsys):
     assert list(tmp_path.iterdir()) == []
 
 
-@pytest.mark.skipif(os.geteuid() == 0, reason="root writes into a mode-555 folder; the check is os.access + a probe")
-@pytest.mark.parametrize("argv", [["render", ROOT / "samples" / "hello.phn", "-q"], ["blender-addon"]])
-def test_a_read_only_output_folder_is_exit_2_naming_it(tmp_path, argv, capsys):
+@pytest.mark.parametrize("argv", [["render", ROOT / "samples" / "hello.phn", "-q"],
+                                  ["dub", ROOT / "samples" / "hello.wav", "--audio", ROOT / "samples" / "hello.wav"],
+                                  ["blender-addon"]])
+def test_a_read_only_output_folder_is_exit_2_naming_it(tmp_path, argv, capsys, monkeypatch):
+    # as tests/test_cli_failures.py does: creating a file there fails as a read-only folder
+    # makes it (root may write into a mode-555 folder, so chmod shows nothing here)
     folder = tmp_path / "ro"
     folder.mkdir()
-    folder.chmod(0o555)
-    code, err = _run(argv + ["-o", folder / "out.zip" if argv[0] == "blender-addon" else folder / "out.mp4"], capsys)
-    folder.chmod(0o755)
-    assert code == 2 and "cannot write here" in err and str(folder) in err
+    real_open = os.open
+
+    def refusing_open(path, flags, *args, **kwargs):
+        if os.path.dirname(os.fspath(path)) == str(folder) and flags & os.O_CREAT:
+            raise OSError(30, "Read-only file system", os.fspath(path))
+        return real_open(path, flags, *args, **kwargs)
+
+    monkeypatch.setattr(os, "open", refusing_open)
+    out = folder / ("out.zip" if argv[0] == "blender-addon" else "out.mp4")
+    code, err = _run(argv + ["-o", out], capsys)
+    monkeypatch.undo()
+    assert code == 2 and "cannot write here" in err and f"{folder} is not writable" in err
+    assert list(folder.iterdir()) == []
 
 
 @pytest.mark.parametrize("argv", [["render", ROOT / "samples" / "hello.phn", "--audio", "/dev/stdin"],

@@ -116,7 +116,8 @@ def _check_writable(out: str) -> None:
     try:   # a read-only file system says so only when written to (os.access is True for root)
         fd, probe = tempfile.mkstemp(dir=folder, prefix=".lipsync-probe-")
     except OSError as exc:
-        raise InputError(f"cannot write here: the folder {folder}: {exc.strerror or exc}", path=out) from None
+        raise InputError(f"cannot write here: the folder {folder} is not writable ({exc.strerror or exc})",
+                         path=out) from None
     os.close(fd)
     os.unlink(probe)
 
