@@ -149,3 +149,44 @@ def test_audio_over_the_limit_is_measured_by_decoding_and_refused_before_alignin
         assert "hello.wav: lasts more than 2 s; this server renders at most 2 s per job" in state["error"]
     finally:
         srv.stop()
+
+
+def _gone(pid: int, within: float) -> bool:
+    """Whether ``pid`` has exited (or is a zombie awaiting its reaper) within ``within`` s."""
+    deadline = time.monotonic() + within
+    while True:
+        stat = subprocess.run(["ps", "-o", "stat=", "-p", str(pid)], capture_output=True, text=True).stdout.strip()
+        if not stat or stat.startswith("Z"):
+            return True
+        if time.monotonic() > deadline:
+            return False
+        time.sleep(0.05)
+
+
+def test_a_job_worker_dies_with_a_killed_server(tmp_path):
+    # The job's worker sits in a process group of its own (so the job timeout can kill its
+    # ffmpeg with it); a server killed with SIGKILL must not leave it rendering on.
+    p = subprocess.Popen([sys.executable, "-m", "lipsync", "serve", "--port", "0", "--method", "dissolve"],
+                         env=dict(os.environ, TMPDIR=str(tmp_path)), stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE, text=True)
+    try:
+        url = p.stdout.readline().split()[-1]
+        base, query = url.split("?")
+        base = base.rstrip("/")
+        job = httpx.post(f"{base}/api/render?{query}&name=long.phn", content=_timit(590)).json()["job"]
+        deadline = time.monotonic() + 60
+        while httpx.get(f"{base}/api/jobs/{job}?{query}").json()["frames"] < 25:
+            assert time.monotonic() < deadline
+            time.sleep(0.05)
+        ffmpeg = _ffmpeg_children(p.pid)
+        assert ffmpeg
+        out = subprocess.run(["ps", "-o", "pid=,ppid=", "-e"], capture_output=True, text=True).stdout
+        workers = [int(r.split()[0]) for r in out.splitlines() if r.split()[1] == str(p.pid)]
+        assert workers   # the job's worker process, a child of serve
+        p.kill()
+        p.wait(timeout=10)
+    finally:
+        if p.poll() is None:
+            p.kill()
+    assert all(_gone(pid, 5.0) for pid in workers), "a job worker outlived its killed server"
+    assert _gone(int(ffmpeg[0].split()[0]), 5.0), "the job's ffmpeg outlived its killed server"

@@ -164,7 +164,7 @@ class Jobs:
         job.state = "running"
         deadline = time.monotonic() + self.job_timeout
         receive, send = _FORK.Pipe(duplex=False)
-        worker = _FORK.Process(target=self._render_in_worker, args=(send, source, options, fps, job.folder),
+        worker = _FORK.Process(target=self._render_in_worker, args=(send, source, options, fps, job.folder, os.getpid()),
                                name=f"lipsync-job-{job.id}", daemon=True)
         worker.start()
         send.close()
@@ -209,13 +209,17 @@ class Jobs:
             else:
                 return message
 
-    def _render_in_worker(self, send, source: Path, options, fps: float, folder: Path) -> None:
+    def _render_in_worker(self, send, source: Path, options, fps: float, folder: Path, parent: int) -> None:
         """The job itself, in a forked worker process that can be killed at any stage
         (reading, aligning, planning, rendering): its own process group, so its ffmpeg goes
         with it."""
+        from .._proc import die_with_parent
         from ..encode import ffmpeg
         from ..pipeline.clip import render_clip
 
+        # its own group takes it out of the server's, so a server killed with SIGKILL would
+        # leave it rendering on: the kernel ends it with the server instead
+        die_with_parent(parent)
         os.setpgrp()
         ffmpeg.OWN_SESSION = False   # its ffmpeg stays in this group, and is killed with it
         try:
