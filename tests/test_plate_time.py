@@ -144,7 +144,8 @@ def test_render_takes_plate_start_and_refuses_a_negative_one(tmp_path, capsys):
 
 
 def test_a_live_render_follows_a_plate_timeline_too(grid_bank):
-    # render --live (LiveClip) has no viseme timeline: its start comes from its frames
+    # render --live (LiveClip) starts the plate where a live session does (its start), on the
+    # plate timeline Plate.index follows by default
     from pathlib import Path
 
     from lipsync.pipeline.liveclip import LiveClip
@@ -152,7 +153,9 @@ def test_a_live_render_follows_a_plate_timeline_too(grid_bank):
     wav = Path(__file__).parents[1] / "samples" / "hello.wav"
     clip = LiveClip(grid_bank, wav, fps=25)
     again = LiveClip(grid_bank, wav, fps=25)
-    assert clip.plate_line is not None and clip.plate_start == again.plate_start
+    assert clip.plate_line is not None and clip.plate_start == again.plate_start == 0.0
+    assert [clip.plate.index(i, 25.0, clip.plate_line) for i in range(len(clip))] == \
+        [clip.plate.index(i, 25.0) for i in range(len(clip))]
     top = min(clip.plate.compositor.roi(p, clip.plate.frames.shape[1:])[1] for p in clip.plate.poses)
     for i in (0, 30, len(clip) - 1):
         j = clip.plate.index(i, 25.0, clip.plate_line)
