@@ -67,6 +67,9 @@ class Animator:
         banks made from video). By default frame i of such a bank is plate frame
         :meth:`lipsync.composite.plate.Plate.index` with the morphed lower face on it
         (:mod:`lipsync.composite.plate`): the speaker's own blinks and head motion.
+    plate_start : float, optional
+        Seconds into the idle plate where the clip starts (``--plate-start``); default: a
+        place derived from the timeline (:func:`lipsync.composite.plate_time.default_start`).
 
     Attributes
     ----------
@@ -80,7 +83,8 @@ class Animator:
 
     def __init__(self, bank: Union[Bank, str, "os.PathLike[str]"], timeline, fps: float = DEFAULT_FPS, *,
                  map: Union[str, "os.PathLike[str]", PhonemeMap, None] = None, method: str = "flow",
-                 timing=None, store: Optional[FlowStore] = None, timeline_options=None, still: bool = False):
+                 timing=None, store: Optional[FlowStore] = None, timeline_options=None, still: bool = False,
+                 plate_start: Optional[float] = None):
         self.bank = bank if isinstance(bank, Bank) else Bank.load(bank)
         self.fps = check_fps(fps)
         if not isinstance(timeline, Timeline):
@@ -97,16 +101,29 @@ class Animator:
         self.specs: List[FrameSpec] = sequence(self.visemes, fps=self.fps, rest=self.bank.rest, timing=self.timing,
                                                closures=pmap.closures, classes=viseme_classes(pmap, self.bank.rest))
         self.renderer = Renderer(self.bank, method=method, store=store)
-        self._attach_plate(still)
+        self._attach_plate(still, plate_start)
 
-    def _attach_plate(self, still: bool) -> None:
-        """The bank's idle plate to composite onto, unless ``still`` (or the bank has none)."""
+    def _attach_plate(self, still: bool, plate_start: Optional[float] = None) -> None:
+        """The bank's idle plate to composite onto, unless ``still`` (or the bank has none),
+        and this clip's way through it (:mod:`lipsync.composite.plate_time`): from
+        ``plate_start`` seconds, by default a place derived from the frames' mouth shapes (the
+        same clip the same frames; another sentence another place)."""
         self.plate = None
+        self.plate_line = None
         if not still and self.bank.plate is not None and self.bank.channels == 3:
             from ..composite.plate import load_plate
+            from ..composite.plate_time import default_start
 
             self.plate = load_plate(self.bank)
             self._mouth = threading.local()  # each render thread its own morphed frame
+            if self.plate is None:  # switched off in bank.yaml
+                return
+            if plate_start is None:  # the frames' own content (an Animator's or a LiveClip's specs)
+                key = [(s.from_viseme, s.to_viseme, round(float(s.alpha), 4)) for s in self.specs]
+                plate_start = default_start(key) * len(self.plate) / self.plate.fps
+            #: Where on the plate this clip starts, seconds (``--plate-start``).
+            self.plate_start = float(plate_start)
+            self.plate_line = self.plate.timeline(self.plate_start)
 
     @classmethod
     def from_audio(cls, bank: Union[Bank, str, "os.PathLike[str]"], audio, text: Optional[str] = None,
@@ -177,7 +194,7 @@ class Animator:
             mouth = self._mouth.frame = np.empty_like(out)
         # only the lower face's box of the morph is read: only that box is rendered
         self.renderer.render(spec.from_viseme, spec.to_viseme, spec.alpha, out=mouth, region=self.plate.region)
-        return self.plate.render_into(index, self.fps, mouth, out)
+        return self.plate.render_into(index, self.fps, mouth, out, self.plate_line)
 
     def same_as_previous(self, index: int) -> bool:
         """Whether frame ``index`` is identical to frame ``index - 1`` (a held shape).

@@ -8,14 +8,16 @@ stay; its lower face is replaced by the speaker's bank morphed to the new speech
     bank (--bank, else made from VIDEO by lipsync init --video and cached)
         --face mesh of its pictures--> lower-face mask (union over the visemes), still points
     SPEECH (+ --text) --aligner--> phones --Animator (map, timing)--> one FrameSpec per frame
-    frame i: plate = VIDEO frame pingpong(i) (forwards, then backwards when the speech is
-        longer; cut when shorter) --PlateCompositor (morphed lower face, ROI only)-->
+    frame i: plate = VIDEO frame from --plate-start on (default its start), played straight;
+        when the speech is longer, on along a plate timeline that joins the video to itself
+        where its frames match, never mid-blink (lipsync.composite.plate_time); cut when
+        shorter --PlateCompositor (morphed lower face, ROI only)-->
         --> encoder (H.264 + the new speech as AAC) --> OUT (renamed into place)
 
 Frames where the tracker lost the face are written as they are, with one warning naming
 them (frame numbers and times). Caches live under the user's cache folder
 (``$XDG_CACHE_HOME/lipsync/dub``), one entry per video content (sha256 of its bytes): the
-face track and, per phoneme map, the bank made from it. An entry that does not load is a
+face track and, per phoneme map, transcript and language of the video, the bank made from it. An entry that does not load is a
 miss: removed and made again.
 """
 
@@ -34,13 +36,13 @@ from typing import List, Optional, Tuple
 import numpy as np
 
 from ..errors import InputError, PathLike
-from ..composite.plate import PlateCompositor, colour_lut, pingpong, plate_colour
+from ..composite.plate import PlateCompositor, colour_lut, plate_colour
 
 __all__ = ["dub", "DubReport", "DubWarning", "cache_root", "lost_frames_text"]
 
 #: Cache format: bump when what an entry holds changes (older entries are then misses).
-CACHE_VERSION = 1
-#: Decoded plate frames kept for playing the video backwards (speech longer than the
+CACHE_VERSION = 2  # 2: the video turned upright before tracking; the bank's key has its language
+#: Decoded plate frames kept for going back in the video (speech longer than the
 #: video) are held in a temporary file beside the output (``.OUT.partial-PID.plate-frames``)
 #: rather than in memory: a 30 s 720p video is 2 GB of RGB.
 _MEMMAP_SUFFIX = ".plate-frames"
@@ -180,15 +182,42 @@ def video_track(video: Path, info, *, entry: Optional[Path], quiet: bool, mesh=N
     return track
 
 
+def bank_key(map=None, text: Optional[str] = None, lang: Optional[str] = None) -> str:
+    """The cache name of a bank made from a video: its phoneme map, transcript and the
+    language of its speech (English and no language given are one, as are the default map
+    and none given).
+
+    Examples
+    --------
+    >>> bank_key(lang="es") == bank_key(lang="es"), bank_key(lang="es") == bank_key(), bank_key(lang="en") == bank_key()
+    (True, False, True)
+    """
+    from ..phonetics.g2p import is_english
+    from ..phonetics.phonemes import DEFAULT_MAP
+
+    lang = None if lang is None or is_english(lang) else lang
+    map = DEFAULT_MAP if map is None else map  # the command line's default and the API's are one map
+    return hashlib.sha256(repr((os.fspath(map) if map is not None else None, text, lang)).encode()).hexdigest()[:12]
+
+
+def _align_speech(audio: Path, text: Optional[str], lang: Optional[str]):
+    """The new speech's words and phones (:func:`lipsync.speech.align.align`, as
+    :meth:`lipsync.Animator.from_audio` aligns them)."""
+    from ..speech.align import MissingWordsWarning, align
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", MissingWordsWarning)  # words spelt out: the alignment says so
+        return align(audio, text, lang=lang)
+
+
 def bank_from_video(video: Path, *, entry: Path, map=None, text: Optional[str] = None, jobs=None,
                     quiet: bool = True, track=None, lang: Optional[str] = None):
-    """The bank ``lipsync init OUT --video VIDEO [--text TEXT]`` makes, cached in ``entry``
-    (one per map and transcript)."""
+    """The bank ``lipsync init OUT --video VIDEO [--text TEXT] [--lang LANG]`` makes, cached
+    in ``entry`` (one per map, transcript and language of the video's speech)."""
     from ..banks.bank import Bank
     from ..videobank import make_bank
 
-    key = hashlib.sha256(repr((os.fspath(map) if map is not None else None, text, lang)).encode()).hexdigest()[:12]
-    folder = entry / f"bank-{key}"
+    folder = entry / f"bank-{bank_key(map, text, lang)}"
     if (folder / "bank.yaml").is_file():
         try:
             return Bank.load(folder)
@@ -269,7 +298,7 @@ def colour_table(bank, video: Path, track, poses: np.ndarray, bank_mesh: np.ndar
 
 class _PlateReader:
     """The video's frames by index for render threads: decoded once, in order; kept in a
-    temporary file only when the speech outlasts the video (played backwards)."""
+    temporary file only when the speech outlasts the video (joined to itself)."""
 
     def __init__(self, video: Path, info, *, keep: bool, output: Path):
         from ..face.video import read_video
@@ -325,12 +354,56 @@ class _PlateReader:
             self._path.unlink(missing_ok=True)
 
 
+def _refuse_silence(samples: np.ndarray, audio: Path) -> None:
+    """A digitally silent speech file (its loudest 10 ms below the aligner's silence) has
+    nothing to dub: exit 2 rather than a still mouth."""
+    from ..speech.align import SILENCE_DBFS
+
+    n = len(samples) // 160
+    x = samples[:max(n, 1) * 160].astype(np.float32) / 32768.0
+    if x.size < 160:
+        x = np.pad(x, (0, 160 - x.size))
+    loudest = float(20 * np.log10(np.sqrt((x.reshape(-1, 160) ** 2).mean(axis=1)).max() + 1e-12))
+    if loudest < SILENCE_DBFS:
+        raise InputError(f"is silent (loudest {loudest:.0f} dBFS; speech is above {SILENCE_DBFS:g}): there is no "
+                         f"speech to dub with", path=audio)
+
+
+def video_frames_for(track, n: int, start: float = 0.0) -> np.ndarray:
+    """The video frame shown at each of ``n`` output frames: from ``start`` seconds on,
+    straight to (nearly) its end; then along a plate timeline
+    (:class:`lipsync.composite.plate_time.PlateTimeline`) that joins it to itself where the
+    face above the nose matches (face-mesh points, :func:`~lipsync.composite.plate_time.upper_face_features`)
+    and never inside a blink (eye opening of the face mesh).
+
+    Examples
+    --------
+    >>> from types import SimpleNamespace
+    >>> t = SimpleNamespace(points=np.zeros((10, 468, 3)), found=np.ones(10, bool), fps=25.0)
+    >>> video_frames_for(t, 4, start=0.2).tolist()
+    [5, 6, 7, 8]
+    """
+    from ..composite.plate_time import PlateTimeline, PlateTimes, upper_face_features
+    from ..face.measure import eye_opening
+
+    nv = len(track.points)
+    first = int(round(start * track.fps)) % max(nv, 1)
+    if first + n <= nv:
+        return np.arange(first, first + n)
+    eyes = eye_opening(track.points)
+    eyes[~np.asarray(track.found, bool)] = np.nan
+    times = PlateTimes(upper_face_features(track.points, track.found), eyes, track.fps)
+    # the video played through first (joins only from its last MIN_RUN_S)
+    return PlateTimeline(times, start=first / nv, straight=nv - first - times.min_run).frames(n)
+
+
 # --------------------------------------------------------------------------- the pipeline
 
 def dub(video: PathLike, audio: PathLike, output: PathLike, *, text: Optional[str] = None, bank=None,
         video_text: Optional[str] = None, map=None, timing=None, crf: int = 18, preset: Optional[str] = None,
         store=None, jobs: Optional[int] = None, quiet: bool = False, cache: Optional[PathLike] = None,
-        lang: Optional[str] = None) -> DubReport:
+        lang: Optional[str] = None, video_lang: Optional[str] = None,
+        plate_start: Optional[float] = None) -> DubReport:
     """Re-voice ``video`` with the speech in ``audio`` (``lipsync dub``).
 
     Parameters
@@ -362,8 +435,14 @@ def dub(video: PathLike, audio: PathLike, output: PathLike, *, text: Optional[st
     cache : path-like, optional
         Cache folder (default :func:`cache_root`).
     lang : str, optional
-        The language of the new speech and of VIDEO's (BCP 47; default English), as ``--lang``
+        The language of the new speech (BCP 47; default English), as ``--lang``
         (:func:`lipsync.speech.align.align`).
+    video_lang : str, optional
+        The language of what is said in ``video`` (default English), used only to make its
+        bank; when its words cannot be recognised there the bank is made from the phones
+        heard, or from the lips alone (:func:`lipsync.videobank.speech.transcribe`).
+    plate_start : float, optional
+        Seconds into ``video`` where the output starts (default 0: the video as it is).
 
     Returns
     -------
@@ -372,8 +451,14 @@ def dub(video: PathLike, audio: PathLike, output: PathLike, *, text: Optional[st
     Raises
     ------
     lipsync.errors.InputError
-        ``video`` is missing or not a video, or shows no face; ``audio`` is missing or has
-        no sound (the message names the file).
+        ``video`` is missing or not a video, or shows no face, or a face no way up;
+        ``audio`` is missing, has no sound or is silent (the message names the file).
+
+    Warns
+    -----
+    lipsync.speech.align.TranscriptMismatchWarning
+        ``text`` does not fit the new speech at all (``lipsync dub`` stops on it with exit
+        2 unless ``--allow-mismatch``, as ``lipsync render`` does).
 
     Examples
     --------
@@ -420,19 +505,29 @@ def dub(video: PathLike, audio: PathLike, output: PathLike, *, text: Optional[st
     samples = load_audio(audio)  # AudioError (an InputError) naming a file without sound
     if samples.size == 0:
         raise InputError("has no sound to dub with (0 samples)", path=audio)
+    _refuse_silence(samples, audio)
+    if plate_start is not None and not (np.isfinite(plate_start) and plate_start >= 0):
+        raise InputError(f"--plate-start must be a number of seconds, 0 or more (got {plate_start})")
     entry = Path(os.fspath(cache)) if cache is not None else cache_root()
     entry = entry / _digest(video)
     seconds["probe"] = time.perf_counter() - t
 
     t = time.perf_counter()
+    alignment = _align_speech(audio, text, lang)  # first: a transcript that does not fit stops before the long work
+    seconds["align"] = time.perf_counter() - t
+
+    t = time.perf_counter()
     mesh = FaceMesh()
+    from ..videobank.sources import find_upright
+
+    info = find_upright(video, info, mesh)  # as init --video does: a sideways face turned, or refused
     track = video_track(video, info, entry=entry, quiet=quiet, mesh=mesh)
     seconds["track"] = time.perf_counter() - t
 
     t = time.perf_counter()
     if bank is None:
         bank = bank_from_video(video, entry=entry, map=map, text=video_text, jobs=jobs, quiet=quiet, track=track,
-                               lang=lang)
+                               lang=video_lang)
     elif not isinstance(bank, Bank):
         bank = Bank.load(bank)
     seconds["bank"] = time.perf_counter() - t
@@ -446,8 +541,8 @@ def dub(video: PathLike, audio: PathLike, output: PathLike, *, text: Optional[st
     t = time.perf_counter()
     if not isinstance(store, FlowStore):
         store = FlowStore.for_bank(bank, store)
-    anim = Animator.from_audio(bank, audio, text, fps=info.fps, lang=lang, map=map, timing=timing, store=store,
-                               still=True)
+    anim = Animator(bank, alignment.phones, fps=info.fps, map=map, timing=timing, store=store, still=True)
+    anim.alignment = alignment
     n = len(anim)
     if n == 0:
         raise InputError("the speech lasts 0 s: there is no frame to write", path=audio)
@@ -456,11 +551,11 @@ def dub(video: PathLike, audio: PathLike, output: PathLike, *, text: Optional[st
     nb = anim.renderer.nb
     if any(not store.pair_path(store.pair_key(bank, a, b, nb.axis)).exists() for a, b in all_pairs(bank.names)):
         preprocess(bank, store=store, jobs=jobs, quiet=quiet, normalised=nb)
-    seconds["align"] = time.perf_counter() - t
+    seconds["align"] += time.perf_counter() - t
 
     t = time.perf_counter()
     nv = len(track)
-    plate_of = [pingpong(i, nv) for i in range(n)]
+    plate_of = video_frames_for(track, n, plate_start or 0.0)
     lost = tuple(i for i in range(n) if not track.found[plate_of[i]])
     if lost:
         warnings.warn(f"{video}: no face in the video at output frame(s) {lost_frames_text(lost, info.fps)}; "
@@ -469,7 +564,8 @@ def dub(video: PathLike, audio: PathLike, output: PathLike, *, text: Optional[st
     bank_shape = anim.renderer.shape + (anim.renderer.channels,)
     scratch = threading.local()
     output.parent.mkdir(parents=True, exist_ok=True)
-    reader = _PlateReader(video, info, keep=n > nv, output=output)
+    straight = bool(np.all(np.diff(plate_of) == 1)) if n > 1 else True
+    reader = _PlateReader(video, info, keep=not straight, output=output)
     shape = (info.size[1], info.size[0], 3)
     geometry = [compositor.geometry(p, shape) if found else None for p, found in zip(poses, track.found)]
 

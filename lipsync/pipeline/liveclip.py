@@ -157,4 +157,6 @@ class LiveClip(Animator):
         self.specs = live_specs(audio, self.bank, fps=fps, lookahead=lookahead, map=map, timing=timing, quiet=quiet)
         self.fps = float(fps)
         self.renderer = Renderer(self.bank, method=method, store=store)
-        self._attach_plate(still)
+        # the plate from its start, on the plate timeline a live session follows
+        # (Plate.index's default): render --live shows what the session shows
+        self._attach_plate(still, plate_start=0.0)
