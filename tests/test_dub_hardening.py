@@ -150,16 +150,25 @@ def test_an_unwritable_default_cache_warns_and_dubs_without_caching(cache, tmp_p
     assert os.listdir(tmpdir) == []  # the bank made for this run only is gone with it
 
 
-def test_an_entry_that_is_a_file_is_a_miss(cache, tmp_path):
+@pytest.mark.parametrize("kind", ["file", "link"])
+def test_an_entry_that_is_a_file_or_a_link_is_a_miss(cache, tmp_path, kind):
     root = tmp_path / "c"
     root.mkdir()
     entry = cache["entry"]
-    (root / entry.name).write_text("not an entry")
+    outside = tmp_path / "outside"
+    if kind == "file":
+        (root / entry.name).write_text("not an entry")
+    else:  # a link to a folder elsewhere: neither read nor written
+        outside.mkdir()
+        (outside / "track.npz").write_bytes((entry / "track.npz").read_bytes())
+        (root / entry.name).symlink_to(outside, target_is_directory=True)
     bank = tmp_path / "bank"
     shutil.copytree(_bank_of(entry), bank)
     run = _dub(VIDEO, "--audio", SHORT, "--text", SHORT_TEXT, "--bank", bank, "--cache", root, "-o", tmp_path / "o.mp4")
     assert run.returncode == 0, run.stderr
-    assert (root / entry.name / "track.npz").is_file()
+    assert not (root / entry.name).is_symlink() and (root / entry.name / "track.npz").is_file()
+    if kind == "link":
+        assert os.listdir(outside) == ["track.npz"]
 
 
 # --------------------------------------------------------------------------- item 9: damaged entries
