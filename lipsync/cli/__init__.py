@@ -32,6 +32,7 @@ _COMMAND_MODULES = [
     "check",
     "preview",
     "edit",
+    "edit_timeline",  # `lipsync edit-timeline`
     "preprocess",
     "morph",
     "serve",
