@@ -152,25 +152,29 @@ def test_an_unwritable_default_cache_warns_and_dubs_without_caching(cache, tmp_p
     assert os.listdir(tmpdir) == []  # the bank made for this run only is gone with it
 
 
-@pytest.mark.parametrize("kind", ["file", "link"])
-def test_an_entry_that_is_a_file_or_a_link_is_a_miss(cache, tmp_path, kind):
+def test_an_entry_that_is_a_file_is_a_miss(cache, tmp_path):
     root = tmp_path / "c"
     root.mkdir()
     entry = cache["entry"]
-    outside = tmp_path / "outside"
-    if kind == "file":
-        (root / entry.name).write_text("not an entry")
-    else:  # a link to a folder elsewhere: neither read nor written
-        outside.mkdir()
-        (outside / "track.npz").write_bytes((entry / "track.npz").read_bytes())
-        (root / entry.name).symlink_to(outside, target_is_directory=True)
+    (root / entry.name).write_text("not an entry")
     bank = tmp_path / "bank"
     shutil.copytree(_bank_of(entry), bank)
     run = _dub(VIDEO, "--audio", SHORT, "--text", SHORT_TEXT, "--bank", bank, "--cache", root, "-o", tmp_path / "o.mp4")
     assert run.returncode == 0, run.stderr
-    assert not (root / entry.name).is_symlink() and (root / entry.name / "track.npz").is_file()
-    if kind == "link":
-        assert os.listdir(outside) == ["track.npz"]
+    assert (root / entry.name / "track.npz").is_file()
+
+
+def test_an_entry_that_is_a_link_is_replaced_not_followed(cache, tmp_path):
+    from lipsync.pipeline.cache import open_entry
+
+    root, outside = tmp_path / "c", tmp_path / "outside"
+    root.mkdir()
+    outside.mkdir()
+    (outside / "track.npz").write_bytes((cache["entry"] / "track.npz").read_bytes())
+    (root / "0123abcd").symlink_to(outside, target_is_directory=True)
+    e = open_entry("0123abcd", root)
+    assert e.path == root / "0123abcd" and not e.path.is_symlink() and e.path.is_dir()
+    assert os.listdir(e.path) == [] and os.listdir(outside) == ["track.npz"]
 
 
 # --------------------------------------------------------------------------- item 9: damaged entries
@@ -214,6 +218,8 @@ def test_a_track_that_is_a_link_is_not_followed(cache, tmp_path):
 def test_a_bank_entry_linked_outside_is_remade_inside_and_its_target_untouched(cache, tmp_path):
     from lipsync.face.video import probe_video
     from lipsync.phonetics.phonemes import DEFAULT_MAP
+    from lipsync.morphing.store import FlowStore
+    from lipsync.pipeline.cache import load_bank
     from lipsync.pipeline.dubbing import bank_from_video, video_track
 
     root = _copy_cache(cache, tmp_path)
@@ -226,25 +232,23 @@ def test_a_bank_entry_linked_outside_is_remade_inside_and_its_target_untouched(c
     shutil.move(bank, valid)
     (broken / "bank.yaml").write_text("name: [broken\n")
     before = {p: _tree(p) for p in (broken, valid)}
+    bank.symlink_to(broken, target_is_directory=True)
+    assert load_bank(bank) is None and not bank.is_symlink() and not bank.exists()  # a miss: remade
+    assert (broken / "bank.yaml").read_text() == "name: [broken\n"
     info = probe_video(VIDEO)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         track = video_track(VIDEO, info, entry=entry, quiet=True)
-        bank.symlink_to(broken, target_is_directory=True)
-        made = bank_from_video(VIDEO, entry=entry, map=DEFAULT_MAP, track=track)  # the CLI's key
-    assert made.path.resolve().parent == entry.resolve() and not bank.is_symlink() and bank.is_dir()
-    assert (broken / "bank.yaml").read_text() == "name: [broken\n"
     # the valid one: the bank remade here is the one returned, and its flows go into it
     made = _relinked(bank, valid, lambda: bank_from_video(VIDEO, entry=entry, map=DEFAULT_MAP, track=track))
     assert made.path.resolve() == bank.resolve() and not bank.is_symlink() and (bank / "bank.yaml").is_file()
-    from lipsync.morphing.store import FlowStore
-
     assert FlowStore.for_bank(made).root.resolve().is_relative_to(entry.resolve())
     assert {p: _tree(p) for p in (broken, valid)} == before  # nothing written outside the cache
 
 
 def _relinked(bank: Path, target: Path, make):
-    shutil.rmtree(bank)
+    if bank.is_dir() and not bank.is_symlink():
+        shutil.rmtree(bank)
     bank.symlink_to(target, target_is_directory=True)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
