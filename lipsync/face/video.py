@@ -238,6 +238,10 @@ def read_video(path: PathLike, *, info: Optional[VideoInfo] = None) -> Iterator[
     turns = vi.turns % 4
     if turns % 2:
         w, h = h, w  # decoded before the turn
+    if tuple(int(v) for v in meta["size"]) != (w, h):  # replaced since it was probed
+        gen.close()
+        raise InputError(f"changed while it was being read (frames of {meta['size'][0]}x{meta['size'][1]}, "
+                         f"{w}x{h} when probed)", path=p)
     try:
         for buf in gen:
             frame = np.frombuffer(buf, np.uint8).reshape(h, w, 3)
