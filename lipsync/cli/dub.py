@@ -45,6 +45,9 @@ def add_parser(sub) -> None:
     add_store_option(p)
     add_jobs_option(p)
     add_quiet_option(p)
+    from ._samples import add_samples_option
+
+    add_samples_option(p)
     p.set_defaults(func=run)
 
 
@@ -58,7 +61,8 @@ def run(args: argparse.Namespace) -> int:
     out = args.output or os.path.splitext(args.video)[0] + "-dub.mp4"
     report = dub(args.video, args.audio, out, text=args.text, bank=args.bank, video_text=args.video_text,
                  map=args.map, timing=args.timing, crf=args.crf, preset=args.preset, store=args.store,
-                 jobs=args.jobs, quiet=args.quiet, cache=args.cache, lang=args.lang)
+                 jobs=args.jobs, quiet=args.quiet, cache=args.cache, lang=args.lang,
+                 samples=args.samples)
     if not args.quiet:
         print(report.summary(), file=sys.stderr)
     return 0

@@ -67,6 +67,10 @@ class Animator:
         banks made from video). By default frame i of such a bank is plate frame
         :meth:`lipsync.composite.plate.Plate.index` with the morphed lower face on it
         (:mod:`lipsync.composite.plate`): the speaker's own blinks and head motion.
+    samples : {None, "on", "off"} or bool
+        Whether a bank with mouth samples (bank.yaml ``samples:``, banks made from video)
+        shows a real sample per frame on its plate (:mod:`lipsync.pipeline.samplepath`);
+        None: as bank.yaml says; ``"off"``: one picture per viseme, morphed.
 
     Attributes
     ----------
@@ -76,11 +80,14 @@ class Animator:
         The mapped viseme timeline.
     plate : lipsync.composite.plate.Plate or None
         The idle plate frames are composited onto (None: the still pictures).
+    sample_path : lipsync.pipeline.samplepath.SamplePath or None
+        The selected samples (None: the viseme morph).
     """
 
     def __init__(self, bank: Union[Bank, str, "os.PathLike[str]"], timeline, fps: float = DEFAULT_FPS, *,
                  map: Union[str, "os.PathLike[str]", PhonemeMap, None] = None, method: str = "flow",
-                 timing=None, store: Optional[FlowStore] = None, timeline_options=None, still: bool = False):
+                 timing=None, store: Optional[FlowStore] = None, timeline_options=None, still: bool = False,
+                 samples=None):
         self.bank = bank if isinstance(bank, Bank) else Bank.load(bank)
         self.fps = check_fps(fps)
         if not isinstance(timeline, Timeline):
@@ -98,6 +105,20 @@ class Animator:
                                                closures=pmap.closures, classes=viseme_classes(pmap, self.bank.rest))
         self.renderer = Renderer(self.bank, method=method, store=store)
         self._attach_plate(still)
+        self._attach_samples(samples, timeline, pmap, store)
+
+    def _attach_samples(self, option, timeline, pmap, store) -> None:
+        """Select the bank's mouth samples when it has them, they are on and frames go onto its plate."""
+        from .samplepath import SamplePath, bank_samples
+
+        self.sample_path = None
+        self.phones, self.pmap = timeline, pmap  # what a dub's own sample path selects for
+        if self.plate is None or not self.specs:
+            return
+        samples = bank_samples(self.bank, option)
+        if samples is not None:
+            self.sample_path = SamplePath(samples, self.specs, timeline, self.fps, pmap, self.bank.rest,
+                                          store=store or FlowStore.for_bank(self.bank))
 
     def _attach_plate(self, still: bool) -> None:
         """The bank's idle plate to composite onto, unless ``still`` (or the bank has none)."""
@@ -175,6 +196,11 @@ class Animator:
         mouth = getattr(self._mouth, "frame", None)
         if mouth is None:
             mouth = self._mouth.frame = np.empty_like(out)
+        if self.sample_path is not None:
+            j = self.plate.index(index, self.fps)
+            np.copyto(out, self.plate.frames[j])
+            pose = self.plate.poses[j]
+            return self.sample_path.render_onto(index, out, pose, self.sample_path.prepared(j, pose, out.shape))
         # only the lower face's box of the morph is read: only that box is rendered
         self.renderer.render(spec.from_viseme, spec.to_viseme, spec.alpha, out=mouth, region=self.plate.region)
         return self.plate.render_into(index, self.fps, mouth, out)

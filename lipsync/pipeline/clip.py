@@ -176,7 +176,7 @@ def render_clip(timeline, output: PathLike, *, bank=None, audio: Optional[PathLi
                 format: Optional[str] = None, crf: int = DEFAULT_CRF, preset: str = DEFAULT_PRESET,
                 store=None, jobs: Optional[int] = None, quiet: bool = False,
                 timeline_options=None, progress=None, background=None, composite=None,
-                lang: Optional[str] = None, live=None, still: bool = False) -> ClipReport:
+                lang: Optional[str] = None, live=None, still: bool = False, samples=None) -> ClipReport:
     """Render one clip to ``output`` (a video, an animation, or a folder of numbered PNGs).
 
     Parameters
@@ -229,6 +229,10 @@ def render_clip(timeline, output: PathLike, *, bank=None, audio: Optional[PathLi
         ``plate:``, banks made from video): by default each frame's lower face is
         composited onto the plate frame due at that time (:mod:`lipsync.composite.plate`),
         so the speaker blinks and moves.
+    samples : {None, "on", "off"} or bool
+        A bank with mouth samples shows a selected real sample per frame on its plate
+        (:mod:`lipsync.pipeline.samplepath`); ``"off"``: one picture per viseme morphed, as
+        before; None: bank.yaml's ``samples:`` says.
 
     Returns
     -------
@@ -287,7 +291,8 @@ def render_clip(timeline, output: PathLike, *, bank=None, audio: Optional[PathLi
     else:
         # the idle plate (a bank made from video) only where the frame is the bank's picture itself
         anim = Animator(bank, timeline, fps=fps, map=map, method=method, timing=timing, store=store,
-                        timeline_options=timeline_options, still=still or not compositor.passthrough)
+                        timeline_options=timeline_options, still=still or not compositor.passthrough,
+                        samples=samples)
     n = len(anim)
     if n == 0:  # a video needs a frame; a timeline of no length has none to show (README: Rendering)
         where = getattr(timeline, "path", None) if hasattr(timeline, "segments") else os.fspath(timeline)

@@ -330,7 +330,7 @@ class _PlateReader:
 def dub(video: PathLike, audio: PathLike, output: PathLike, *, text: Optional[str] = None, bank=None,
         video_text: Optional[str] = None, map=None, timing=None, crf: int = 18, preset: Optional[str] = None,
         store=None, jobs: Optional[int] = None, quiet: bool = False, cache: Optional[PathLike] = None,
-        lang: Optional[str] = None) -> DubReport:
+        lang: Optional[str] = None, samples=None) -> DubReport:
     """Re-voice ``video`` with the speech in ``audio`` (``lipsync dub``).
 
     Parameters
@@ -364,6 +364,9 @@ def dub(video: PathLike, audio: PathLike, output: PathLike, *, text: Optional[st
     lang : str, optional
         The language of the new speech and of VIDEO's (BCP 47; default English), as ``--lang``
         (:func:`lipsync.speech.align.align`).
+    samples : {None, "on", "off"} or bool
+        A bank with mouth samples shows a selected real sample per frame
+        (:mod:`lipsync.pipeline.samplepath`); ``"off"``: one picture per viseme morphed.
 
     Returns
     -------
@@ -453,6 +456,7 @@ def dub(video: PathLike, audio: PathLike, output: PathLike, *, text: Optional[st
     nb = anim.renderer.nb
     if any(not store.pair_path(store.pair_key(bank, a, b, nb.axis)).exists() for a, b in all_pairs(bank.names)):
         preprocess(bank, store=store, jobs=jobs, quiet=quiet, normalised=nb)
+    sample_path = _sample_path(bank, anim, samples, compositor, store)
     seconds["align"] = time.perf_counter() - t
 
     t = time.perf_counter()
@@ -469,6 +473,8 @@ def dub(video: PathLike, audio: PathLike, output: PathLike, *, text: Optional[st
     reader = _PlateReader(video, info, keep=n > nv, output=output)
     shape = (info.size[1], info.size[0], 3)
     geometry = [compositor.geometry(p, shape) if found else None for p, found in zip(poses, track.found)]
+    sample_geometry = geometry if sample_path is None else [
+        sample_path.compositor.plate.geometry(p, shape) if found else None for p, found in zip(poses, track.found)]
 
     def render_into(i: int, buf: np.ndarray) -> None:
         j = plate_of[i]
@@ -478,6 +484,9 @@ def dub(video: PathLike, audio: PathLike, output: PathLike, *, text: Optional[st
         mouth = getattr(scratch, "frame", None)
         if mouth is None:
             mouth = scratch.frame = np.empty(bank_shape, np.uint8)
+        if sample_path is not None:
+            sample_path.render_onto(i, buf, poses[j], geometry=sample_geometry[j])
+            return
         s = anim.specs[i]  # only the lower face's box of the morph is read: only that box is rendered
         anim.renderer.render(s.from_viseme, s.to_viseme, s.alpha, out=mouth, region=compositor.region)
         compositor.apply(mouth[..., :3], buf, poses[j], geometry[j])
@@ -495,3 +504,14 @@ def dub(video: PathLike, audio: PathLike, output: PathLike, *, text: Optional[st
     seconds["render"] = time.perf_counter() - t
     return DubReport(output=str(output), frames=n, fps=float(info.fps), size=(w, h), video_frames=nv, lost=lost,
                      bank=str(bank.path), seconds=seconds)
+
+
+def _sample_path(bank, anim, option, compositor, store):
+    """The dub's :class:`~lipsync.pipeline.samplepath.SamplePath` (None: the bank has no samples
+    or they are off)."""
+    from .samplepath import SamplePath, bank_samples
+
+    got = bank_samples(bank, option)
+    if got is None or not anim.specs:
+        return None
+    return SamplePath(got, anim.specs, anim.phones, anim.fps, anim.pmap, bank.rest, lut=compositor.lut, store=store)
