@@ -118,7 +118,7 @@ class Animator:
         samples = bank_samples(self.bank, option)
         if samples is not None:
             self.sample_path = SamplePath(samples, self.specs, timeline, self.fps, pmap, self.bank.rest,
-                                          store=store or FlowStore.for_bank(self.bank))
+                                          store=store or FlowStore.for_bank(self.bank), timing=self.timing)
 
     def _attach_plate(self, still: bool) -> None:
         """The bank's idle plate to composite onto, unless ``still`` (or the bank has none)."""

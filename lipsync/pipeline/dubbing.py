@@ -514,4 +514,5 @@ def _sample_path(bank, anim, option, compositor, store):
     got = bank_samples(bank, option)
     if got is None or not anim.specs:
         return None
-    return SamplePath(got, anim.specs, anim.phones, anim.fps, anim.pmap, bank.rest, lut=compositor.lut, store=store)
+    return SamplePath(got, anim.specs, anim.phones, anim.fps, anim.pmap, bank.rest, lut=compositor.lut, store=store,
+                      timing=anim.timing)

@@ -88,15 +88,21 @@ class SamplePath:
         The colour table onto the plate (a dub's).
     store : FlowStore, optional
         Where the join flows are kept.
+    timing : DominanceParams, optional
+        The render's dominance constants (the bank's fitted ones): the predicted lip opening's.
     """
 
-    def __init__(self, samples, specs, timeline, fps: float, pmap, rest: str, *, lut=None, store=None):
+    def __init__(self, samples, specs, timeline, fps: float, pmap, rest: str, *, lut=None, store=None,
+                 timing=None):
         from ..composite.samples import SampleCompositor
         from ..selection import Selector, frame_plan
 
         self.samples = samples
         self.selector = _selector(samples, pmap, rest)
-        self.selection = self.selector.select(specs, timeline, fps)
+        from ..motion.coarticulation import DominanceParams
+
+        self.selection = self.selector.select(specs, timeline, fps,
+                                              timing if isinstance(timing, DominanceParams) else None)
         tg = self.selection.target
         self.src, self.dst, self.alpha = frame_plan(self.selection.samples, self.selector.succ, tg.closed | tg.rest)
         tag = hashlib.sha256(samples.affine.tobytes() + samples.lips.tobytes()).digest()

@@ -13,7 +13,7 @@ Examples
 --------
 >>> import numpy as np
 >>> crop_origin(np.array([[1.0, 0, -10], [0, 1.0, -20]]), (5, 6, 15, 16), (12, 12))
-(9, 20)
+(14, 25)
 """
 
 from __future__ import annotations
@@ -43,10 +43,10 @@ THUMB = (16, 12)
 #: grown 0.15 *outside* the jaw for pictures pasted onto the plate; a sample pasted so far
 #: out brings its own moment's background and collar beside the plate's cheek (a visible
 #: stripe along the jaw on GRID s1): inside the jaw line it brings only face.
-SAMPLE_GROW = -0.08
+SAMPLE_GROW = -0.05
 #: Its feather, eye distances: wider than the plate mask's 0.12, so that what differs
 #: between a sample's moment and the plate's (light on the skin, a shadow) fades out.
-SAMPLE_FEATHER = 0.2
+SAMPLE_FEATHER = 0.12
 #: A phone label that means silence, as the table stores it.
 SILENCE = "sil"
 
@@ -90,11 +90,25 @@ def to_bank_matrices(footage, framing, rest_mesh: np.ndarray) -> Dict[Tuple[int,
     return out
 
 
+#: Labels that mean silence in the aligners' and readers' phone tiers.
+SILENCE_LABELS = ("", "sil", "sp", "spn", "pau", "<sil>", "h#", "epi")
+
+
+def phone_label(label: str) -> str:
+    """A phone label as the table stores it: upper case, :data:`SILENCE` for silence.
+
+    Examples
+    --------
+    >>> phone_label(" aa "), phone_label("sp")
+    ('AA', 'sil')
+    """
+    lab = label.strip()
+    return SILENCE if lab.lower() in SILENCE_LABELS else lab.upper()
+
+
 def phone_rows(phones, n: int, fps: float) -> Tuple[List[str], List[str], List[str]]:
     """Per frame of a clip, the phone said at its time (``i / fps``) and the phones before and after."""
-    segs = [(s.start, s.end, s.label.strip().upper() or SILENCE) for s in phones.segments]
-    segs = [(a, b, SILENCE if lab.lower() in ("sil", "sp", "spn", "pau", "<sil>", "h#") else lab)
-            for a, b, lab in segs]
+    segs = [(s.start, s.end, phone_label(s.label)) for s in phones.segments]
     starts = np.array([s[0] for s in segs]) if segs else np.zeros(0)
     cur, prev, nxt = [], [], []
     for i in range(n):
@@ -218,6 +232,7 @@ def _table(footage, keys, to_bank, origins, crops, box) -> Dict[str, np.ndarray]
         "phones": np.array(vocab), "phone": np.array([index[t[0]] for t in labels], np.int16),
         "prev": np.array([index[t[1]] for t in labels], np.int16),
         "next": np.array([index[t[2]] for t in labels], np.int16),
+        "origin": np.array([origins[k] for k in keys], np.int32).reshape(-1, 2),
         "affine": affine, "appearance": appearance(crops, affine, box),
     }
 

@@ -21,6 +21,7 @@ array           shape, dtype       meaning
 ``phones``      ``(P,)`` str       phone labels (``sil`` for silence)
 ``phone``       ``(N,)`` int       index into ``phones``: the phone said at the frame
 ``prev``/``next`` ``(N,)`` int     the phones before and after it
+``origin``      ``(N, 2)`` int     the crop's top-left corner in the source frame (pixels)
 ``affine``      ``(N, 2, 3)``      crop pixels -> bank pixels (the stabilisation onto the
                                    bank's canonical face frame, the shift of the crop composed)
 ``appearance``  ``(N, D)`` float   a small grey thumbnail of the mouth box in bank pixels,
@@ -40,7 +41,7 @@ Examples
 >>> read_table(p)
 Traceback (most recent call last):
 ...
-lipsync.errors.BankError: ...samples.npz: the samples table does not read (BadZipFile: File is not a zip file)
+lipsync.errors.BankError: ...samples.npz: the samples table does not read (...)
 """
 
 from __future__ import annotations
@@ -71,12 +72,12 @@ ARRAYS = (
     ("clips", "U", ()), ("fps", "f", ()), ("clip", "i", ()), ("frame", "i", ()), ("run", "i", ()),
     ("opening", "f", ()), ("width", "f", ()), ("protrusion", "f", ()), ("lips", "f", (44, 2)),
     ("phones", "U", ()), ("phone", "i", ()), ("prev", "i", ()), ("next", "i", ()),
-    ("affine", "f", (2, 3)), ("appearance", "f", None), ("gain", "f", (3,)),
+    ("origin", "i", (2,)), ("affine", "f", (2, 3)), ("appearance", "f", None), ("gain", "f", (3,)),
     ("mask", "i", None),
 )
 #: Arrays with one row per sample (the rest are per clip or per phone label).
 PER_SAMPLE = ("clip", "frame", "run", "opening", "width", "protrusion", "lips", "phone", "prev", "next",
-              "affine", "appearance", "gain")
+              "origin", "affine", "appearance", "gain")
 
 
 def lip_points() -> tuple:
