@@ -48,6 +48,9 @@ from . import grid
 
 #: The renderings compared, in the order printed.
 METHODS = ("samples", "samples, joins cut", "old morph", "hard cuts")
+#: Held-out sentences from this index on tuned the selection (lipsync.selection.select.WEIGHTS,
+#: TARGET_GAIN, lipsync.selection.plan.JOIN_FRAMES): the figure judges on the ones before.
+TUNED_FROM = 24
 #: Mouth crops the detector sees: (W, H) grey.
 CROP = (64, 48)
 
@@ -450,8 +453,9 @@ def samples_figures(ctx: Context, rows: List[dict]) -> None:
     _size_rows(bank_path, rows)
     _stage_rows(bank, rows)
     _selection_rows(bank, rows)
-    _render_rows(ctx, bank, held[:6] if ctx.quick else held, mesh, rows)
-    pairs = list(zip(held[0::2], held[1::2]))[: 3 if ctx.quick else 10]
+    judged = held[:TUNED_FROM]  # the selection's weights were chosen on the rest
+    _render_rows(ctx, bank, judged[:6] if ctx.quick else judged, mesh, rows)
+    pairs = list(zip(judged[0::2], judged[1::2]))[: 3 if ctx.quick else 10]
     _dub_rows(ctx, bank, pairs, mesh, rows)
     a, b = held[:2]
     big = _with_sound(videos[:3], ctx.tmp)

@@ -393,6 +393,7 @@ def dub(video: PathLike, audio: PathLike, output: PathLike, *, text: Optional[st
         d = grid_dir()
         print(dub(d / "bbwm5s.mpg", d / "prap6p.mpg", "dubbed.mp4", text=transcript("prap6p")).summary())
     """
+    sample_option = samples  # the name is the audio's below
     from tqdm import tqdm
 
     from .animator import Animator
@@ -456,7 +457,7 @@ def dub(video: PathLike, audio: PathLike, output: PathLike, *, text: Optional[st
     nb = anim.renderer.nb
     if any(not store.pair_path(store.pair_key(bank, a, b, nb.axis)).exists() for a, b in all_pairs(bank.names)):
         preprocess(bank, store=store, jobs=jobs, quiet=quiet, normalised=nb)
-    sample_path = _sample_path(bank, anim, samples, compositor, store)
+    sample_path = _sample_path(bank, anim, sample_option, compositor, store)
     seconds["align"] = time.perf_counter() - t
 
     t = time.perf_counter()
