@@ -239,6 +239,30 @@ def phone_schedule(samples, timeline, n: int, fps: float, pmap, rest: str, closu
     return predicted(specs, {k: x[0] for k, x in values.items()}), predicted(specs, {k: x[1] for k, x in values.items()})
 
 
+#: Join features kept: the principal components holding this share of their variance (the
+#: 88 lip coordinates and 192 thumbnail pixels of GRID s1's samples: 99% in ~40 of 280), so
+#: each frame's K x K distances cost a fifth.
+JOIN_VARIANCE = 0.99
+
+
+def _principal(features: np.ndarray) -> np.ndarray:
+    """``features`` in the basis of their principal components, the fewest holding
+    :data:`JOIN_VARIANCE` of the variance (distances between rows kept to that share).
+
+    Examples
+    --------
+    >>> x = np.c_[np.arange(10.0), np.zeros(10), np.arange(10.0)]
+    >>> y = _principal(x)
+    >>> y.shape, round(float(np.linalg.norm(y[3] - y[7])), 6) == round(float(np.linalg.norm(x[3] - x[7])), 6)
+    ((10, 1), True)
+    """
+    centred = features - features.mean(axis=0)
+    _, sv, vt = np.linalg.svd(centred, full_matrices=False)
+    share = np.cumsum(sv ** 2) / max(float((sv ** 2).sum()), 1e-300)
+    k = int(np.searchsorted(share, JOIN_VARIANCE)) + 1
+    return np.ascontiguousarray(centred @ vt[:k].T)
+
+
 class Selector:
     """A bank's samples made ready for selection under one phoneme map: per viseme (and per
     viseme's closed and rest subsets) a k-d tree (:class:`Tree`) over (opening, width) scaled by their weights,
@@ -257,9 +281,14 @@ class Selector:
         lips = samples.lips.reshape(len(samples), -1).astype(np.float64)
         scale = float(np.median(np.ptp(samples.lips[..., 0], axis=1))) or 1.0  # mouth width, bank pixels
         # lips and thumbnails scaled so that a squared distance is the join's squared cost
-        self.join_features = np.concatenate([lips * (WEIGHTS["lips"] / scale / np.sqrt(lips.shape[1] / 2)),
-                                             samples.appearance * (WEIGHTS["look"] /
-                                                                   np.sqrt(samples.appearance.shape[1]))], axis=1)
+        feats = np.concatenate([lips * (WEIGHTS["lips"] / scale / np.sqrt(lips.shape[1] / 2)),
+                                samples.appearance.astype(np.float64) * (WEIGHTS["look"] /
+                                                                         np.sqrt(samples.appearance.shape[1]))], axis=1)
+        self.join_features = _principal(feats)
+        # labels as integer codes: the per-frame comparisons are of ints, not strings
+        self._codes: Dict[str, int] = {}
+        self.c_phone, self.c_prev, self.c_next, self.c_vis = (self.encode(x) for x in (
+            self.labels, self.prev_labels, self.next_labels, self.vis))
         closed = samples.opening <= CLOSED
         silent = self.labels == "sil"
         self._pools = {}
@@ -274,6 +303,10 @@ class Selector:
         closed_all = np.nonzero(closed)[0]
         self._pools[("*", "closed")] = (closed_all, Tree(self.point[closed_all])) if closed_all.size else \
             self._pools[("*", "any")]
+
+    def encode(self, labels: np.ndarray) -> np.ndarray:
+        """Labels as integer codes (a label first seen gets the next code)."""
+        return np.array([self._codes.setdefault(x, len(self._codes)) for x in labels.tolist()], np.int32)
 
     def pool(self, viseme: str, kind: str):
         """The samples a frame may take and their tree: the viseme's (closed or at rest when
@@ -292,15 +325,18 @@ class Selector:
         ok = self.samples.opening[ids] <= CLOSED
         return ok & (self.labels[ids] == "sil") if kind == "rest" else ok
 
-    def target_cost(self, ids: np.ndarray, tg: Target, t: int) -> np.ndarray:
-        """The target cost of each of ``ids`` at frame ``t`` (see :data:`WEIGHTS`)."""
+    def target_cost(self, ids: np.ndarray, tg: Target, t: int, codes=None) -> np.ndarray:
+        """The target cost of each of ``ids`` at frame ``t`` (see :data:`WEIGHTS`); ``codes``:
+        the target's phone, prev, next and viseme codes (:meth:`encode`), made once per utterance."""
         w = WEIGHTS
+        if codes is None:
+            codes = tuple(self.encode(x) for x in (tg.phone, tg.prev, tg.next, tg.viseme))
+        phone_c, prev_c, next_c, vis_c = codes
         d = np.abs(self.point[ids] - [tg.opening[t] * w["open"], tg.width[t] * w["width"]]).sum(axis=1)
-        same = self.labels[ids] == tg.phone[t]
-        phone = np.where(same, w["phone_same"], np.where(self.vis[ids] == tg.viseme[t], w["phone_viseme"],
-                                                         w["phone_other"]))
-        ctx = w["context"] * ((self.prev_labels[ids] != tg.prev[t]).astype(float) +
-                              (self.next_labels[ids] != tg.next[t]).astype(float))
+        phone = np.where(self.c_phone[ids] == phone_c[t], w["phone_same"],
+                         np.where(self.c_vis[ids] == vis_c[t], w["phone_viseme"], w["phone_other"]))
+        ctx = w["context"] * ((self.c_prev[ids] != prev_c[t]).astype(float) +
+                              (self.c_next[ids] != next_c[t]).astype(float))
         where = w["position"] * np.abs(self.position[ids] - tg.position[t])
         return d + phone + ctx + where
 
@@ -335,10 +371,11 @@ class Selector:
         tg = make_target(self.samples, specs, timeline, fps, self.pmap, self.rest, self.closures, params)
         v = Viterbi()
         count = 0
+        codes = tuple(self.encode(x) for x in (tg.phone, tg.prev, tg.next, tg.viseme))
         for t in range(len(specs)):
             ids = self.candidates(tg, t, v)
             count += len(ids)
-            v.step(ids, self.target_cost(ids, tg, t), None if t == 0 else self.join_cost(v.last, ids))
+            v.step(ids, self.target_cost(ids, tg, t, codes), None if t == 0 else self.join_cost(v.last, ids))
         path = np.array(v.path(), np.int64)
         joins = np.ones(len(path), bool)
         if len(path) > 1:
