@@ -33,7 +33,8 @@ bench: $(STAMP)
 test-browser: $(STAMP)
 	@if [ ! -x /usr/bin/chromium ] || [ ! -x /usr/bin/chromedriver ]; then \
 		apt-get update && apt-get install -y chromium chromium-driver; fi
-	$(BIN)/python -m pytest -q -s -p no:cacheprovider tests/test_browser_editor.py tests/test_serve_mic_browser.py
+	$(BIN)/python -m pytest -q -s -p no:cacheprovider tests/test_browser_editor.py tests/test_serve_mic_browser.py \
+		tests/test_timing_editor_browser.py
 
 # The Blender add-on in real headless Blender (also part of `make test` when blender is
 # present). Installs Debian's blender first, only if it is missing.
@@ -64,6 +65,7 @@ docs-images: $(STAMP)
 	$(BIN)/lipsync morph visemes/toon X D --frames 5 -o docs/strip.png
 	$(BIN)/lipsync preview visemes/toon -o docs/preview.png
 	$(BIN)/python -m lipsync.editor.browser visemes/toon docs/editor.png
+	$(BIN)/python -m lipsync.timing_editor.browser tests/data/grid-s1-audio/bram2n.flac tests/data/grid-s1-audio/bram2n.align docs/timing-editor.png
 	$(BIN)/python tools/face_overlay.py docs/face-lines.jpg
 	$(BIN)/python tools/atlas_picture.py docs/atlas.jpg
 	$(BIN)/python tools/real_strip.py docs/strip-real.png

@@ -343,3 +343,50 @@ def atomic_write_bytes(path: PathLike, data_writer: Callable) -> None:
         if isinstance(exc, OSError):
             raise _naming(exc, path) from None
         raise
+
+
+def refuse_output_over_input(outputs, inputs, *, folders=()) -> None:
+    """Raise InputError when an output is one of the inputs (issue 38: ``-o`` equal to the
+    input replaced it).
+
+    The same file is the same inode, so a hard link, a symbolic link (to the file or to its
+    folder) and another spelling of the path are caught as well as the same name. An output
+    that is an existing file inside one of ``folders`` (a bank's folder: its pictures,
+    bank.yaml, flows) is refused too. Outputs that do not exist yet replace nothing.
+
+    Examples
+    --------
+    >>> import os, tempfile
+    >>> d = tempfile.mkdtemp()
+    >>> a = os.path.join(d, "a.wav"); _ = open(a, "wb").write(b"RIFF")
+    >>> os.symlink(a, os.path.join(d, "link.wav"))
+    >>> refuse_output_over_input([os.path.join(d, "out.mp4")], [a])           # a new file: fine
+    >>> refuse_output_over_input([os.path.join(d, "link.wav")], [a])          # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    lipsync.errors.InputError: ...link.wav: is the input ...a.wav (the same file); write the output to another name
+    """
+    from .errors import InputError
+
+    def stat(path):
+        try:
+            return os.stat(path)
+        except (OSError, ValueError):   # missing, a broken link, an unreadable folder, a NUL byte
+            return None
+
+    ins = [(os.fspath(p), stat(p)) for p in inputs if p]
+    roots = [os.path.realpath(f) for f in folders if f and os.path.isdir(f)]
+    for out in outputs:
+        if not out:
+            continue
+        st = stat(out)
+        if st is None:
+            continue
+        for name, ist in ins:
+            if ist is not None and os.path.samestat(st, ist):
+                raise InputError(f"is the input {name} (the same file); write the output to another name",
+                                 path=os.fspath(out))
+        real = os.path.realpath(out)
+        for root in roots:
+            if os.path.isfile(real) and os.path.commonpath([real, root]) == root:
+                raise InputError(f"is a file of the bank {root}; write the output outside the bank's folder",
+                                 path=os.fspath(out))

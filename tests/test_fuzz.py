@@ -46,6 +46,7 @@ import numpy as np
 import pytest
 import yaml
 from hypothesis import given, note
+from hypothesis import settings as hypothesis_settings
 from hypothesis import strategies as st
 
 import synthetic
@@ -1115,3 +1116,85 @@ def test_serve_render_query_fuzz(serve_client, data):
     elif valid_body and params.get("format") in (None, "rhubarb-tsv", "tsv"):
         rate = 25.0 if fps is None else float(fps)
         assert state["frames"] == math.ceil(0.4 * rate - 1e-9), (state, rate)
+
+
+# --- transcripts and long cue files (issue 38) -------------------------------------------------
+#
+# Transcripts: any text -- huge words, emoji, mixed scripts, digits, path-like values, sizes
+# around the limit -- either gives lowercase dictionary-spelled words or an InputError, and
+# no warning is longer than a screen. Long cue files: Rhubarb TSV files of many short cues
+# read and planned: the array plan (long tracks) equals the segment-by-segment plan.
+
+from hypothesis_profiles import PROFILE  # noqa: E402
+
+from lipsync.speech.align import read_transcript  # noqa: E402
+from lipsync.speech.scripts import check_english_script  # noqa: E402
+from lipsync.speech.text import MAX_TRANSCRIPT_CHARS, normalise_transcript  # noqa: E402
+
+_WORD_CHARS = st.sampled_from(list("abcxyzABC019'-.,!?& ") + ["é", "ß", "ж", "语", "ع", "\U0001F600", "\u0301",
+                                                               "\u200b", "\t", "\n", "/", "ː"])
+_TRANSCRIPTS = st.one_of(
+    st.text(_WORD_CHARS, max_size=400),
+    st.text(max_size=200),
+    st.builds(lambda c, n: c * n, st.sampled_from(["a", "zq", "\U0001F600", "9", "ж"]), st.integers(1, 60_000)),
+    st.builds(lambda n, extra: ("word " * (MAX_TRANSCRIPT_CHARS // 5 + 1))[:MAX_TRANSCRIPT_CHARS - 1 + n] + extra,
+              st.integers(0, 3), st.sampled_from(["", "x"])),
+    st.sampled_from(["/dev/zero", "/dev/null", "./missing.txt", "../x.lab", "~/script.txt", "e.g.", "and/or"]),
+)
+_MAX_MESSAGE = 1000
+
+
+@FUZZ
+@given(text=_TRANSCRIPTS)
+def test_transcript_fuzz(text):
+    import warnings
+
+    with watchdog("transcript"), warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        try:
+            read = read_transcript(text)
+            if read is None:
+                return
+            assert len(read) <= MAX_TRANSCRIPT_CHARS
+            words = normalise_transcript(read)
+            check_english_script(read, words, path="t.txt")
+        except InputError as exc:
+            assert len(str(exc)) < _MAX_MESSAGE
+            return
+    assert all(re.fullmatch(r"[a-z]+(?:'[a-z]+)*", w) for w in words), words[:5]
+    assert all(len(str(w.message)) < _MAX_MESSAGE for w in caught)
+
+
+def _cue_file(path: Path, starts, labels) -> None:
+    path.write_text("".join(f"{t:.2f}\t{v}\n" for t, v in zip(starts, labels)))
+
+
+#: Cues per long file: past the sequencer's array-plan threshold under ``make fuzz``.
+_LONG_CUES = (20, 25_000) if PROFILE == "fuzz" else (20, 3_000)
+
+
+@hypothesis_settings(FUZZ, max_examples=60 if PROFILE == "fuzz" else 15)
+@given(n=st.integers(*_LONG_CUES), seed=st.integers(0, 2 ** 32 - 1), step=st.sampled_from([1, 2, 3, 7]))
+def test_long_cue_file_fuzz(tmp_path_factory, n, seed, step):
+    import lipsync.motion.sequencer as sq
+    from lipsync.motion._plan_kernel import plan_arrays
+
+    rng = np.random.default_rng(seed)
+    hundredths = np.cumsum(rng.integers(1, step + 1, size=n))   # 10 ms cues and a few longer ones
+    starts = np.concatenate([[0], hundredths[:-1]]) / 100
+    labels = rng.choice(list("ABCDEFGHX"), size=n, p=[.2, .2, .1, .1, .1, .1, .05, .05, .1])
+    labels[-1] = "X"
+    path = tmp_path_factory.mktemp("cues") / "long.tsv"
+    _cue_file(path, starts, labels)
+    with watchdog("long cue file"):
+        tl = read_timeline(path)
+        arrays = plan_arrays(tl, rest="X", closures={"A"}, max_held_pause=sq.MAX_HELD_PAUSE_S,
+                                min_segment=sq.MIN_SEGMENT_S, total=tl.duration, start=0.0)
+    saved, sq.ARRAY_PLAN_FROM = sq.ARRAY_PLAN_FROM, 10 ** 12
+    try:
+        segment_by_segment = sq.plan_segments(tl, rest="X", closures={"A"})
+    finally:
+        sq.ARRAY_PLAN_FROM = saved
+    assert arrays == segment_by_segment
+    assert arrays[0][0] == 0.0 and arrays[-1][1] == tl.duration
+    assert all(a[1] == b[0] and a[2] != b[2] for a, b in zip(arrays, arrays[1:]))

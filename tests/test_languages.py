@@ -118,7 +118,8 @@ def test_espeak_sentence_aligns_within_the_measured_tolerance():
 
 def test_unknown_language_exits_2_listing_the_codes(tmp_path):
     r = lipsync("align", HELLO, "--lang", "klingon", "-o", tmp_path / "x.TextGrid")
-    assert r.returncode == 2 and "unknown language 'klingon'" in r.stderr and "pt-br" in r.stderr
+    assert r.returncode == 2 and "unknown language 'klingon'" in r.stderr and "piqd (Klingon)" in r.stderr
+    assert "`lipsync languages` lists all" in r.stderr and "pt-br" not in r.stderr   # the closest, not all 150
     assert not (tmp_path / "x.TextGrid").exists()
 
 

@@ -79,12 +79,12 @@ def test_a_tiny_upload_of_a_ten_hour_timeline_fails_at_once_and_the_queue_moves_
 
 
 def test_a_job_over_its_time_is_stopped_and_the_next_one_runs():
-    srv = Server(job_timeout=1.0)
+    srv = Server(job_timeout=3.0)   # a worker process per job: a 3 s clip takes ~1 s on a loaded machine
     try:
-        long_job = srv.submit("long.phn", _timit(500))     # 12,500 frames: far more than a second's work
+        long_job = srv.submit("long.phn", _timit(500))     # 12,500 frames: far more than 3 s of work
         small = srv.submit("hello.phn", HELLO.read_bytes())
         state = srv.wait(long_job)
-        assert state["state"] == "error" and "stopped after 1 s (--job-timeout)" in state["error"]
+        assert state["state"] == "error" and "stopped after 3 s (--job-timeout)" in state["error"]
         assert 0 < state["frames"] < 12500
         done = srv.wait(small)
         assert done["state"] == "done" and done["frames"] == 75
@@ -94,8 +94,11 @@ def test_a_job_over_its_time_is_stopped_and_the_next_one_runs():
 
 
 def _ffmpeg_children(pid: int):
+    # the job's ffmpeg is a child of the job's worker process, itself a child of serve's
     out = subprocess.run(["ps", "-o", "pid=,ppid=,comm=", "-e"], capture_output=True, text=True).stdout
-    return [line for line in out.splitlines() if "ffmpeg" in line and line.split()[1] == str(pid)]
+    rows = [line.split() for line in out.splitlines()]
+    family = {str(pid)} | {r[0] for r in rows if r[1] == str(pid)}
+    return [" ".join(r) for r in rows if "ffmpeg" in r[2] and r[1] in family]
 
 
 def test_sigterm_stops_serve_within_seconds_while_a_job_renders(tmp_path):
@@ -127,8 +130,14 @@ def test_sigterm_stops_serve_within_seconds_while_a_job_renders(tmp_path):
     assert p.returncode == 0 and took < 5.0
     assert list(tmp.iterdir()) == []           # job folder, upload and partial mp4 removed
     pid = int(ffmpeg[0].split()[0])
-    time.sleep(0.2)
-    assert subprocess.run(["ps", "-p", str(pid)], capture_output=True).returncode != 0  # ffmpeg gone
+    # killed with the job's worker; reaped by init (it is the worker's child), or a zombie until then
+    deadline = time.monotonic() + 3.0
+    while time.monotonic() < deadline:
+        stat = subprocess.run(["ps", "-o", "stat=", "-p", str(pid)], capture_output=True, text=True).stdout.strip()
+        if not stat or stat.startswith("Z"):
+            break
+        time.sleep(0.05)
+    assert not stat or stat.startswith("Z")  # ffmpeg gone
 
 
 def test_audio_over_the_limit_is_measured_by_decoding_and_refused_before_aligning():
@@ -140,3 +149,44 @@ def test_audio_over_the_limit_is_measured_by_decoding_and_refused_before_alignin
         assert "hello.wav: lasts more than 2 s; this server renders at most 2 s per job" in state["error"]
     finally:
         srv.stop()
+
+
+def _gone(pid: int, within: float) -> bool:
+    """Whether ``pid`` has exited (or is a zombie awaiting its reaper) within ``within`` s."""
+    deadline = time.monotonic() + within
+    while True:
+        stat = subprocess.run(["ps", "-o", "stat=", "-p", str(pid)], capture_output=True, text=True).stdout.strip()
+        if not stat or stat.startswith("Z"):
+            return True
+        if time.monotonic() > deadline:
+            return False
+        time.sleep(0.05)
+
+
+def test_a_job_worker_dies_with_a_killed_server(tmp_path):
+    # The job's worker sits in a process group of its own (so the job timeout can kill its
+    # ffmpeg with it); a server killed with SIGKILL must not leave it rendering on.
+    p = subprocess.Popen([sys.executable, "-m", "lipsync", "serve", "--port", "0", "--method", "dissolve"],
+                         env=dict(os.environ, TMPDIR=str(tmp_path)), stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE, text=True)
+    try:
+        url = p.stdout.readline().split()[-1]
+        base, query = url.split("?")
+        base = base.rstrip("/")
+        job = httpx.post(f"{base}/api/render?{query}&name=long.phn", content=_timit(590)).json()["job"]
+        deadline = time.monotonic() + 60
+        while httpx.get(f"{base}/api/jobs/{job}?{query}").json()["frames"] < 25:
+            assert time.monotonic() < deadline
+            time.sleep(0.05)
+        ffmpeg = _ffmpeg_children(p.pid)
+        assert ffmpeg
+        out = subprocess.run(["ps", "-o", "pid=,ppid=", "-e"], capture_output=True, text=True).stdout
+        workers = [int(r.split()[0]) for r in out.splitlines() if r.split()[1] == str(p.pid)]
+        assert workers   # the job's worker process, a child of serve
+        p.kill()
+        p.wait(timeout=10)
+    finally:
+        if p.poll() is None:
+            p.kill()
+    assert all(_gone(pid, 5.0) for pid in workers), "a job worker outlived its killed server"
+    assert _gone(int(ffmpeg[0].split()[0]), 5.0), "the job's ffmpeg outlived its killed server"

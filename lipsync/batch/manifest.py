@@ -22,7 +22,7 @@ from dataclasses import dataclass
 from pathlib import Path, PurePosixPath
 from typing import Dict, List, Optional, Tuple, Union
 
-from .._files import read_input_bytes
+from .._files import read_input_bytes, refuse_output_over_input
 from ..errors import InputError
 from ..motion.frames import DEFAULT_FPS
 
@@ -346,6 +346,11 @@ def read_manifest(path: PathLike, outdir: Optional[PathLike] = None) -> List[Cli
         if method not in METHODS:
             errs.append(f"method {method!r}: unknown; valid: {', '.join(METHODS.names())}")
 
+        if out_name is not None and out_real is not None:
+            try:   # issue 38: an output never replaces one of its row's inputs (by inode: links too)
+                refuse_output_over_input([out_real / out_name], [input_path, audio_path, text_file, map_file, path])
+            except InputError as exc:
+                errs.append(f"output {out!r}: {str(exc).split(': ', 1)[-1]}")
         if errs:
             problems.extend((line, e) for e in errs)
             continue

@@ -1,8 +1,9 @@
 """The real footage every real-face figure measures on: GRID speaker s1 (40 sentences).
 
-``/work/shared/grid-s1`` in this project's workspace (``$LIPSYNC_GRID`` elsewhere, or the
-``shared/grid-s1`` folder beside or above the checkout; the three clips in
-``tests/data/grid-s1`` when none is there). The sentences are split once, here, so every
+The data: the 40 sentences (video, audio, GRID's word alignments) of speaker s1 of the GRID
+audio-visual corpus (Cooke et al. 2006, CC BY 4.0), in a folder named by ``$LIPSYNC_GRID``,
+or else a ``shared/grid-s1`` folder beside the checkout or one level above it; the three
+clips in ``tests/data/grid-s1`` when none is there. The sentences are split once, here, so every
 figure makes banks from the same clips and judges on the same held-out ones:
 
 * :data:`BANK_CLIPS`: every fourth sentence in name order, 10 sentences (30 s of video),

@@ -32,10 +32,12 @@ _COMMAND_MODULES = [
     "check",
     "preview",
     "edit",
+    "edit_timeline",  # `lipsync edit-timeline`
     "preprocess",
     "morph",
     "serve",
     "batch",
+    "languages",
     "blender_addon",  # `lipsync blender-addon`: a command's dashes are underscores in its module name
 ]
 
@@ -112,12 +114,16 @@ def main(argv: Optional[List[str]] = None) -> int:
     try:
         if getattr(args, "allow_mismatch", True) is False:
             warnings.filterwarnings("error", category=TranscriptMismatch)
+        from ._common import check_outputs_apart
+
+        check_outputs_apart(args)   # an output never replaces an input (issue 38)
         return int(func(args) or 0)
     except InputError as exc:
         print(f"lipsync: error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except TranscriptMismatch as exc:
-        print(f"lipsync: error: {exc}; if it is the right transcript, --allow-mismatch goes on",
+        print(f"lipsync: error: {exc}; stopped, nothing written: if it is the right transcript, "
+              f"--allow-mismatch goes on",
               file=sys.stderr)
         return EXIT_BAD_INPUT
     except KeyboardInterrupt:

@@ -24,6 +24,104 @@ from ..motion.timing import DEFAULT_CURVE, timing_names
 DEFAULT_MOHO_FPS = 24.0
 
 
+#: argparse attributes that name a command's input files (a list for nargs options); a
+#: ``text`` or ``map`` counts when it names a file. ``bank`` folders are inputs as wholes.
+_INPUT_ARGS = ("timeline", "timelines", "audio", "video", "text", "video_text", "map", "manifest", "atlas", "folder")
+_BANK_ARGS = ("bank", "bank_option")
+#: Inputs that must be files: ffmpeg seeks in media and reads it more than once, and a
+#: transcript is read whole (timelines may come from a pipe: their readers bound the size).
+_FILE_ONLY_ARGS = ("audio", "video", "text", "video_text")
+#: the attribute naming a command's output, and the files a command writes beside it
+_OUTPUT_ARG = "output"
+_BESIDE_OUTPUT = {"atlas": (".json",)}
+
+
+def check_outputs_apart(args: argparse.Namespace) -> None:
+    """Refuse (InputError, exit 2) an output that is one of the command's inputs, before any work.
+
+    Every command that writes goes through here (``lipsync.cli.main`` calls it): the output,
+    and what the command writes beside it, against every input file and the bank's folder,
+    by inode (:func:`lipsync._files.refuse_output_over_input`).
+
+    Examples
+    --------
+    >>> import argparse, os, tempfile
+    >>> d = tempfile.mkdtemp(); p = os.path.join(d, "a.phn"); _ = open(p, "w").write("0 1 aa")
+    >>> check_outputs_apart(argparse.Namespace(timeline=p, output=os.path.join(d, "a.mp4")))
+    >>> check_outputs_apart(argparse.Namespace(timeline=p, output=p))   # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    lipsync.errors.InputError: ...a.phn: is the input ...a.phn (the same file); write the output to another name
+    """
+    from .._files import refuse_output_over_input
+
+    inputs = []
+    for name in _INPUT_ARGS:
+        value = getattr(args, name, None)
+        for v in value if isinstance(value, (list, tuple)) else [value]:
+            if isinstance(v, str) and v and len(v) < 4096 and "\0" not in v:
+                inputs.append(v)
+    for name in _FILE_ONLY_ARGS:
+        value = getattr(args, name, None)
+        for v in value if isinstance(value, (list, tuple)) else [value]:
+            if isinstance(v, str) and v in inputs:
+                _refuse_special_file(v)
+    out = getattr(args, _OUTPUT_ARG, None)
+    if not isinstance(out, str) or not out:
+        return
+    _check_writable(out)
+    outputs = [out] + [os.path.splitext(out)[0] + ext for ext in _BESIDE_OUTPUT.get(getattr(args, "command", ""), ())]
+    banks = [getattr(args, name, None) for name in _BANK_ARGS]
+    inputs += [b for b in banks if isinstance(b, str) and os.path.isfile(b)]   # atlas's first positional
+    refuse_output_over_input(outputs, inputs, folders=[b for b in banks if isinstance(b, str)])
+
+
+#: Where a path names a device or a process's stream rather than a file: ``--audio
+#: /dev/stdin`` passed the "is a file" check (a redirected stdin is a link to the file) and
+#: then failed inside ffmpeg with exit 1 and its raw log (issue 38).
+_SPECIAL_ROOTS = ("/dev/", "/proc/")
+#: Characters the temporary name adds to OUT's (``.OUT.partial-PID-XXXXXXXX.ext``, lipsync._files).
+_PARTIAL_NAME_EXTRA = 32
+
+
+def _refuse_special_file(path: str) -> None:
+    from ..errors import InputError
+
+    if not os.path.exists(path):
+        return
+    real = os.path.realpath(path)
+    if any(p.startswith(_SPECIAL_ROOTS) for p in (os.path.abspath(path), real)) or not (
+            os.path.isfile(real) or os.path.isdir(real)):
+        raise InputError("is a device, pipe or stream, not a file: save the data to a file and give its name",
+                         path=path)
+
+
+def _check_writable(out: str) -> None:
+    """The output's folder exists and takes a file of that name (exit 2 naming OUT, not errno text at the end)."""
+    from ..errors import InputError
+
+    folder = os.path.dirname(os.path.abspath(out)) or "."
+    if not os.path.isdir(folder):
+        return   # the commands say so themselves (some make the folder)
+    try:
+        name_max = os.pathconf(folder, "PC_NAME_MAX")
+    except (OSError, ValueError):
+        name_max = 255
+    if len(os.fsencode(os.path.basename(out))) + _PARTIAL_NAME_EXTRA > name_max:
+        raise InputError(f"the file name is too long ({len(os.path.basename(out))} characters; at most "
+                         f"{name_max - _PARTIAL_NAME_EXTRA} here)", path=out)
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise InputError(f"cannot write here: the folder {folder} is not writable", path=out)
+    import tempfile
+
+    try:   # a read-only file system says so only when written to (os.access is True for root)
+        fd, probe = tempfile.mkstemp(dir=folder, prefix=".lipsync-probe-")
+    except OSError as exc:
+        raise InputError(f"cannot write here: the folder {folder} is not writable ({exc.strerror or exc})",
+                         path=out) from None
+    os.close(fd)
+    os.unlink(probe)
+
+
 def add_bank_option(parser: argparse.ArgumentParser) -> None:
     """``--bank DIR_OR_NAME``: the subject (default: the shipped toon)."""
     parser.add_argument("--bank", default=None, metavar="DIR_OR_NAME",

@@ -76,11 +76,18 @@ def fps_arg(fps: Union[int, float, Fraction]) -> str:
     return str(rate.numerator) if rate.denominator == 1 else f"{rate.numerator}/{rate.denominator}"
 
 
+#: False in a serve job's worker process (lipsync.server.jobs), which is killed with its
+#: whole process group: its ffmpeg must be in that group to go with it.
+OWN_SESSION = True
+
+
 def popen(cmd: List[str], **kwargs) -> subprocess.Popen:
     """Start ffmpeg with stdout discarded, in its own process group."""
     # A separate process group: Ctrl-C in a terminal reaches only Python, which then
     # decides (kill ffmpeg, delete the temp file) instead of ffmpeg finalising a file on its own.
-    if os.name == "posix":
+    if os.name == "posix" and not OWN_SESSION:
+        pass
+    elif os.name == "posix":
         kwargs["start_new_session"] = True
     else:  # pragma: no cover - Windows
         kwargs["creationflags"] = subprocess.CREATE_NEW_PROCESS_GROUP

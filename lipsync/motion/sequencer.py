@@ -38,11 +38,13 @@ Examples
 
 from __future__ import annotations
 
+import heapq
 import math
 from typing import Iterable, List, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
+from ._plan_kernel import plan_arrays
 from .coarticulation import as_params, dominance_sequence
 # FrameSpec and the frame arithmetic live below both timing models; imported here as they
 # always were (lipsync.motion.sequencer.FrameSpec etc.).
@@ -70,6 +72,13 @@ MAX_HELD_PAUSE_S = 0.2
 # Non-closure segments shorter than this are dropped: lips cannot visibly reach a shape in
 # under 50 ms (about one frame at 24 fps), so showing it only adds a one-frame flicker.
 MIN_SEGMENT_S = 0.05
+# Tracks with at least this many segments are planned on arrays (lipsync.motion._plan_kernel:
+# numpy and a numba-compiled rule 4, the same plan): below it the segment-by-segment code is
+# quicker than numba's import (~0.3 s), which the live animator, planning a few seconds at a
+# time, must not pay; above it, that code's ~10 us a segment dominates (3.6 million 10 ms
+# cues, a 10-hour track, took ~50 s).
+ARRAY_PLAN_FROM = 20_000
+
 # Numerical slack when comparing alphas and times (float noise, not a tuning value).
 _EPS = 1e-9
 
@@ -116,6 +125,10 @@ def plan_segments(visemes: Timeline, *, rest: str, closures: Iterable[str] = (),
     [(0.0, 0.2, 'X'), (0.2, 0.6, 'A'), (0.6, 0.9, 'D'), (0.9, 1.0, 'X')]
     """
     closure_set = set(closures)
+    if len(visemes) >= ARRAY_PLAN_FROM:
+        total = visemes.duration if duration is None else float(duration)
+        return plan_arrays(visemes, rest=rest, closures=closure_set, max_held_pause=max_held_pause,
+                           min_segment=min_segment, total=total, start=start)
     segs = base_track(visemes, rest=rest, duration=duration, start=start)   # rules 1-2
     # Rule 3: short pauses between sounds hold the previous viseme.
     held: List[Segment] = []
@@ -125,28 +138,71 @@ def plan_segments(visemes: Timeline, *, rest: str, closures: Iterable[str] = (),
             held.append(Segment(s.start, s.end, held[-1].label))
         else:
             held.append(s)
-    segs = merge(held)
-    # Rule 4: drop short non-closure segments, shortest first, so that a run of short ones
-    # keeps the longest of them; the freed time goes half to each neighbour.
-    while len(segs) > 1:
+    return _drop_short(merge(held), rest=rest, closures=closure_set, min_segment=min_segment)  # rule 4
+
+
+def _drop_short(segs: List[Segment], *, rest: str, closures, min_segment: float
+                ) -> List[Tuple[float, float, str]]:
+    """Rule 4: drop short non-closure segments, shortest first, so that a run of short ones
+    keeps the longest of them; the freed time goes half to each neighbour.
+
+    A heap of candidates over a linked list, so n log n: the list-scanning loop it replaces
+    was quadratic (40k alternating 10 ms cues took over 100 s). Ties go to the earliest
+    segment, as that loop's ``min`` did: a segment keeps the index it started with (a merge
+    keeps the left one's), and indices stay in track order.
+    """
+    n = len(segs)
+    lo = [s.start for s in segs]
+    hi = [s.end for s in segs]
+    label = [s.label for s in segs]
+    prev = list(range(-1, n - 1))
+    nxt = list(range(1, n)) + [-1] if n else []
+    version = [0] * n  # bumped when a segment changes; -1 once it is gone
+    alive, head = n, 0
+
+    def candidate(i: int) -> bool:
         # Rest is exempt: inner pauses that survive rule 3 are long, and leading or trailing
         # silence, however short, keeps the first and last frames at rest.
-        candidates = [i for i, s in enumerate(segs)
-                      if s.duration < min_segment and s.label not in closure_set and s.label != rest]
-        if not candidates:
-            break
-        i = min(candidates, key=lambda k: segs[k].duration)
-        s = segs[i]
-        if i == 0:
-            segs[1] = Segment(s.start, segs[1].end, segs[1].label)
-        elif i == len(segs) - 1:
-            segs[i - 1] = Segment(segs[i - 1].start, s.end, segs[i - 1].label)
+        return hi[i] - lo[i] < min_segment and label[i] not in closures and label[i] != rest
+
+    heap = [(hi[i] - lo[i], i, 0) for i in range(n) if candidate(i)]
+    heapq.heapify(heap)
+    while alive > 1 and heap:
+        _, i, ver = heapq.heappop(heap)
+        if ver != version[i]:
+            continue  # a stale entry: the segment grew or went since
+        version[i] = -1
+        alive -= 1
+        a, b = prev[i], nxt[i]
+        if a < 0:
+            lo[b], head = lo[i], b
+        elif b < 0:
+            hi[a] = hi[i]
         else:
-            segs[i - 1] = Segment(segs[i - 1].start, s.mid, segs[i - 1].label)
-            segs[i + 1] = Segment(s.mid, segs[i + 1].end, segs[i + 1].label)
-        del segs[i]
-        segs = merge(segs)
-    return [(s.start, s.end, s.label) for s in segs]
+            mid = 0.5 * (lo[i] + hi[i])
+            hi[a], lo[b] = mid, mid
+        if a >= 0:
+            nxt[a] = b
+        if b >= 0:
+            prev[b] = a
+        if a >= 0 and b >= 0 and label[a] == label[b]:
+            hi[a] = hi[b]          # rule 2 again: the neighbours now touch
+            nxt[a] = nxt[b]
+            if nxt[b] >= 0:
+                prev[nxt[b]] = a
+            version[b] = -1
+            alive -= 1
+        for j in (a, b):
+            if j >= 0 and version[j] >= 0:
+                version[j] += 1
+                if candidate(j):
+                    heapq.heappush(heap, (hi[j] - lo[j], j, version[j]))
+    out: List[Tuple[float, float, str]] = []
+    i = head if n else -1
+    while i >= 0:
+        out.append((lo[i], hi[i], label[i]))
+        i = nxt[i]
+    return out
 
 
 def plan_transitions(segments: Sequence[Tuple[float, float, str]], *,

@@ -60,7 +60,7 @@ _SEP = "_"
 
 
 class UnknownLanguageError(InputError):
-    """A ``--lang`` code espeak-ng does not speak (the message lists those it does)."""
+    """A ``--lang`` code espeak-ng does not speak (the message names the closest it does)."""
 
 
 class LanguageUnavailableError(InputError):
@@ -212,7 +212,7 @@ def resolve(lang: str) -> str:
     Raises
     ------
     UnknownLanguageError
-        No voice speaks it; the message lists every code.
+        No voice speaks it; the message names the closest codes (``lipsync languages`` lists all).
     LanguageUnavailableError
         The optional espeak-ng extra is not installed.
 
@@ -233,7 +233,27 @@ def resolve(lang: str) -> str:
         if code in voices:
             return code
         parts.pop()
-    raise UnknownLanguageError(f"unknown language {lang!r}; espeak-ng speaks: {', '.join(sorted(voices))}")
+    raise UnknownLanguageError(f"unknown language {lang!r}{_closest(tag, voices)}; `lipsync languages` lists "
+                               f"all {len(voices)} codes espeak-ng speaks")
+
+
+#: Codes an unknown --lang's message suggests at most (the whole list, ~130 codes on one
+#: line, hid the few that mattered: issue 38).
+CLOSEST_CODES = 4
+
+
+def _closest(tag: str, voices) -> str:
+    """``"; did you mean fr (French), frp (...)"``: the codes nearest ``tag`` in spelling or name."""
+    import difflib
+
+    names = {code: voices[code][1] for code in voices}
+    by_code = difflib.get_close_matches(tag, list(names), n=CLOSEST_CODES, cutoff=0.5)
+    # a language's name as people type it ("german"): names starting with it, then close ones
+    lowered = {name.lower(): code for code, name in sorted(names.items(), key=lambda kv: len(kv[0]))[::-1]}
+    prefix = [code for name, code in sorted(lowered.items()) if len(tag) >= 3 and name.startswith(tag)]
+    by_name = [lowered[n] for n in difflib.get_close_matches(tag, list(lowered), n=CLOSEST_CODES, cutoff=0.6)]
+    near = list(dict.fromkeys(prefix + by_name + by_code))[:CLOSEST_CODES]
+    return "; did you mean " + ", ".join(f"{c} ({names[c]})" for c in near) if near else ""
 
 
 _CURRENT = [""]  # the voice set last (under _LOCK)

@@ -39,6 +39,7 @@ Examples
 from __future__ import annotations
 
 import functools
+import unicodedata
 import os
 import re
 import warnings
@@ -123,6 +124,10 @@ class PhoneSet(BaseModel):
         stripped = label
         for mark in self.strip_marks:
             stripped = stripped.replace(mark, "")
+        if self.strip_marks:
+            # any other diacritic as well (ç̥, ɜ̯): a mark never makes a letter another phone;
+            # precomposed letters (ç, ỹ) are one character in NFC and stay whole
+            stripped = "".join(c for c in unicodedata.normalize("NFC", stripped) if not unicodedata.combining(c))
         if stripped != label and stripped:
             return self.normalise(stripped)
         return None
@@ -256,7 +261,7 @@ class PhonemeMap(BaseModel):
         if self.is_silence(label):
             return [self.silence]
         if notation in (None, "english", "arpabet", "timit", "mfa") or (
-                notation == "ipa" and label.strip() not in _IPA_NOT_ENGLISH):
+                notation == "ipa" and _ipa_letters(label) not in _IPA_NOT_ENGLISH):
             english = self._english_targets(label)
             if english is not None or notation in ("english", "arpabet", "timit"):
                 return english
@@ -302,6 +307,22 @@ _BUILTIN_SILENCE = phonetics.SILENCE
 # timeline whose notation is IPA (y: rounded vowel, not the glide; r: trill, not English r;
 # q: uvular stop, not TIMIT's glottal stop).
 _IPA_NOT_ENGLISH = frozenset({"y", "r", "q"})
+# Marks that do not change which letter a label is: length (yː is long y, not ARPAbet Y),
+# half-length, every combining diacritic (ỹ, y̯, r̥) and secondary articulations (rʲ, qʷ).
+_NOT_LETTERS = frozenset("ːˑ:")
+
+
+def _ipa_letters(label: str) -> str:
+    """A label's letters without length marks and diacritics (``yː`` -> ``y``)."""
+    import unicodedata
+
+    from .segments import FEATURES, MODIFIERS
+
+    text = unicodedata.normalize("NFD", label.strip())
+    return "".join(c for c in text if c not in _NOT_LETTERS and not unicodedata.combining(c)
+                   and (c in FEATURES or c not in MODIFIERS))   # ʲ ʷ ʰ: secondary marks, not letters
+
+
 # Notations whose labels are converted into IPA before anything else is asked.
 _CONVERTED = frozenset({"xsampa", "pinyin", "espeak"})
 

@@ -226,10 +226,35 @@ def label_visemes(label: str, rules: Union[str, Sequence[Rule]] = "rhubarb") -> 
     >>> label_visemes("y"), label_visemes("eː"), label_visemes("t͡ʃ", "oculus"), label_visemes("a˥˩")
     (['F'], ['C'], ['DD', 'CH'], ['D'])
     """
-    phone = parse(label)
-    if phone is None:
+    text = label.strip()
+    # A secondary-articulation mark on its own (MFA and espeak sometimes split ``tʲ`` into
+    # ``t`` + ``ʲ``) is the sound it is the superscript of: ʲ is a j-like glide, ʷ a w.
+    text = BARE_MODIFIERS.get(text, text)
+    phone = parse(text)
+    parts = phone.parts if phone is not None else _r_coloured(text)
+    if not parts:
         return None
-    return parts_visemes(phone.parts, compiled(rules) if isinstance(rules, str) else rules)
+    return parts_visemes(parts, compiled(rules) if isinstance(rules, str) else rules)
+
+
+#: The r of espeak's r-coloured vowels written in one label (``ɑːɹ``, ``ɔːɹ``, ``ɪɹ``).
+R_COLOURING = frozenset("ɹɻ")
+
+
+def _r_coloured(text: str):
+    """A vowel and its r colouring in one label: the two parts, each its own viseme (as a
+    diphthong's halves are); None for any other run of sounds (``zz`` is not a phone)."""
+    parts = parse_sequence(text)
+    if parts and len(parts) == 2 and parts[0].features.kind == "vowel" and parts[1].base in R_COLOURING:
+        return parts
+    return None
+
+
+#: Modifier letters read as a label of their own: the sound each is the superscript of.
+BARE_MODIFIERS: Dict[str, str] = {
+    "ʲ": "j", "ʷ": "w", "ᶣ": "ɥ", "ˠ": "ɣ", "ˤ": "ʕ", "ʰ": "h", "ʱ": "ɦ", "ⁿ": "n", "ˡ": "l", "ᵐ": "m",
+    "ᵑ": "ŋ", "ᶮ": "ɲ",
+}
 
 
 def ipa_visemes(transcription: str, rules: Union[str, Sequence[Rule]] = "rhubarb") -> List[Tuple[str, List[str]]]:

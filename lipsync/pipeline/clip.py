@@ -249,7 +249,10 @@ def render_clip(timeline, output: PathLike, *, bank=None, audio: Optional[PathLi
     from ..errors import InputError
     from ..morphing.preprocess import all_pairs, preprocess
     from ..morphing.store import FlowStore
+    from .._files import refuse_output_over_input
 
+    refuse_output_over_input([output], [p for p in (timeline, audio, getattr(timeline_options, "text", None))
+                                        if isinstance(p, (str, os.PathLike))])
     t0 = time.perf_counter()
     if lang is not None:
         import types

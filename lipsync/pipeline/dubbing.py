@@ -404,7 +404,10 @@ def dub(video: PathLike, audio: PathLike, output: PathLike, *, text: Optional[st
     from ..face.landmarks import FaceMesh
     from ..face.video import probe_video
     from ..speech.audio import load_audio
+    from .._files import refuse_output_over_input
     from ..morphing.store import FlowStore
+
+    refuse_output_over_input([output], [video, audio, text, video_text])   # issue 38: -o the video replaced it
 
     seconds = {}
     t = time.perf_counter()

@@ -243,6 +243,52 @@ def read(path: str, data: bytes, options: ReadOptions) -> Timeline:
     return build(path, rows, kind, stated_end=length / float(fps))
 
 
+def read_words(path, tier=None) -> Timeline:
+    """The words of one voice of a Papagayo project (the first, or the one named ``tier``).
+
+    Each word lasts from its first frame to the end of its last frame (clipped to its
+    phrase); ``lipsync edit-timeline`` reads a project's word tier so.
+
+    Examples
+    --------
+    >>> import os, tempfile
+    >>> p = os.path.join(tempfile.mkdtemp(), "hi.pgo")
+    >>> _ = open(p, "w").write("lipsync version 1\\nhi.wav\\n25\\n25\\n1\\nVoice 1\\nhi\\n1\\nhi\\n5\\n14\\n1\\n"
+    ...                        "hi 5 14 2\\n5 HH\\n8 AY\\n")
+    >>> [(w.label, w.start, w.end) for w in read_words(p)]
+    [('hi', 0.2, 0.6)]
+    """
+    from .._files import read_input_bytes
+
+    name = str(path)
+    data = read_input_bytes(name, "a Papagayo project", error=TimelineError)
+    try:
+        text = decode_text(name, data)
+    except TimelineError:
+        text = data.decode("latin-1").replace("\r\n", "\n").replace("\r", "\n")
+    lines = _Lines(name, text)
+    lineno, first = first_nonblank(text)
+    if first.lower() != MAGIC:
+        raise TimelineError(f"first line must be {MAGIC!r}, not {first[:40]!r}", path=name, line=lineno or 1)
+    lines.i = lineno
+    lines.next("the sound file's name")
+    fps = float(lines.number("the frame rate", whole=False, low=FPS_RANGE[0], high=FPS_RANGE[1]))
+    length = lines.number("the sound's length in frames")
+    voices = [_read_voice(lines) for _ in range(lines.number("the number of voices"))]
+    if not voices:
+        raise TimelineError("the project has no voices", path=name)
+    names = [n for n, _ in voices]
+    if tier is not None and tier not in names:
+        raise TimelineError(f"no voice named {tier!r}; voices: {', '.join(map(repr, names))}", path=name)
+    words = voices[names.index(tier) if tier is not None else 0][1]
+    rows = []
+    for p0, p1, (w0, w1, phonemes, line) in words:
+        lo, hi = max(w0, p0), min(w1, p1) + 1
+        if hi > lo:
+            rows.append((lo / fps, hi / fps, lines.lines[line - 1].split()[0], line))
+    return build(name, rows, PHONEME, stated_end=length / fps)
+
+
 def _labels(rows) -> Tuple[str, list]:
     """The timeline kind and labels for the file's phoneme set (see the module notes)."""
     used = {label for _, _, label, _ in rows}

@@ -10,17 +10,22 @@ Bounds (issue 32): a job longer than ``max_clip_seconds`` of video (a 16-byte ti
 say ten hours) fails before any frame, and one running longer than ``job_timeout`` seconds
 is stopped, so a queued job starts within ``(MAX_PENDING - 1) * job_timeout`` seconds
 whatever came before it. :meth:`Jobs.close` (SIGTERM, Ctrl-C) cancels the running job and
-returns within :data:`STOP_WAIT_S`: the render stops at its next frame (its ffmpeg killed,
-its partial output removed); the worker is a daemon thread, so even a job still aligning
-its audio does not hold the process.
+returns within :data:`STOP_WAIT_S`.
+
+Each job runs in a forked worker process of its own (issue 38), so the timeout and a
+shutdown stop it in any stage -- reading, aligning, planning or rendering -- by killing
+its process group (the worker and its ffmpeg); the queue's thread relays its progress.
 """
 
 from __future__ import annotations
 
+import multiprocessing
+import os
 import queue
 import re
 import secrets
 import shutil
+import signal
 import threading
 import time
 import types
@@ -156,32 +161,78 @@ class Jobs:
         return clip
 
     def _run(self, job: Job, source: Path, options, fps: float) -> None:
-        from ..pipeline.clip import render_clip
-
         job.state = "running"
         deadline = time.monotonic() + self.job_timeout
-
-        def progress(done: int, total: int) -> None:
-            job.progress, job.frames = done / max(total, 1), done
-            if self._stop.is_set():
-                raise Stopped("the server is shutting down")
-            if time.monotonic() > deadline:
-                raise Stopped(f"stopped after {self.job_timeout:g} s (--job-timeout)")
-
+        receive, send = _FORK.Pipe(duplex=False)
+        worker = _FORK.Process(target=self._render_in_worker, args=(send, source, options, fps, job.folder, os.getpid()),
+                               name=f"lipsync-job-{job.id}", daemon=True)
+        worker.start()
+        send.close()
+        outcome = None
         try:
-            render_clip(self._clip(source, options), str(job.folder / "out.mp4"), bank=self.bank, store=self.store,
-                        fps=fps, map=self.map, timing=self.timing, method=self.method, quiet=True,
-                        timeline_options=options, progress=progress)
+            outcome = self._follow(job, worker, receive, deadline)
+        finally:
+            if worker.is_alive():   # over its time, or the server stopping: the whole job goes
+                _kill_group(worker)
+            worker.join()
+            receive.close()
+        if outcome is None:
+            outcome = ("error", "render failed: the job's worker ended without a result")
+        kind, message = outcome
+        if kind == "done":
             job.state, job.progress = "done", 1.0
-        except Stopped as exc:
-            job.error, job.state = str(exc), "error"
-        except InputError as exc:
+            return
+        _remove_partials(job.folder)
+        if kind == "input":
             # the server's paths mean nothing to the client: name its upload instead
-            job.error = str(exc).replace(str(source), job.name).replace(str(job.folder), "")
-            job.state = "error"
+            message = message.replace(str(source), job.name)
+        job.error, job.state = message.replace(str(job.folder), ""), "error"
+
+    def _follow(self, job: Job, worker, receive, deadline: float):
+        """Relay the worker's progress into ``job`` until it reports its outcome, or stop it."""
+        while True:
+            if self._stop.is_set():
+                return ("stopped", "the server is shutting down")
+            left = deadline - time.monotonic()
+            if left <= 0:
+                return ("stopped", f"stopped after {self.job_timeout:g} s (--job-timeout)")
+            try:
+                ready = receive.poll(min(left, _POLL_S))
+                message = receive.recv() if ready else None
+            except (EOFError, OSError):
+                return None   # the worker died without a word (killed from outside, out of memory)
+            if message is None:
+                continue
+            if message[0] == "progress":
+                _, done, total = message
+                job.progress, job.frames = done / max(total, 1), done
+            else:
+                return message
+
+    def _render_in_worker(self, send, source: Path, options, fps: float, folder: Path, parent: int) -> None:
+        """The job itself, in a forked worker process that can be killed at any stage
+        (reading, aligning, planning, rendering): its own process group, so its ffmpeg goes
+        with it."""
+        from .._proc import die_with_parent
+        from ..encode import ffmpeg
+        from ..pipeline.clip import render_clip
+
+        # its own group takes it out of the server's, so a server killed with SIGKILL would
+        # leave it rendering on: the kernel ends it with the server instead
+        die_with_parent(parent)
+        os.setpgrp()
+        ffmpeg.OWN_SESSION = False   # its ffmpeg stays in this group, and is killed with it
+        try:
+            render_clip(self._clip(source, options), str(folder / "out.mp4"), bank=self.bank, store=self.store,
+                        fps=fps, map=self.map, timing=self.timing, method=self.method, quiet=True,
+                        timeline_options=options, progress=lambda done, total: send.send(("progress", done, total)))
+            send.send(("done", ""))
+        except InputError as exc:
+            send.send(("input", str(exc)))
         except Exception as exc:  # reported to the client; the server carries on
-            job.error = f"render failed: {type(exc).__name__}: {str(exc)[:200]}".replace(str(job.folder), "")
-            job.state = "error"
+            send.send(("error", f"render failed: {type(exc).__name__}: {str(exc)[:200]}"))
+        finally:
+            send.close()
 
     def get(self, job_id: str) -> Optional[Job]:
         with self._lock:
@@ -202,6 +253,31 @@ class Jobs:
         self._stop.set()
         self._queue.put(None)
         self._worker.join(STOP_WAIT_S)
+
+
+#: How often the server looks at a running job (its progress, its deadline, a shutdown).
+_POLL_S = 0.05
+#: Jobs run in a forked worker: it shares the loaded bank and flow store without copying or
+#: pickling them, and can be killed wherever it is (issue 38: a quadratic planning step ran
+#: 207 s past a 15 s --job-timeout, as only the render loop looked at the deadline).
+_FORK = multiprocessing.get_context("fork")
+
+
+def _kill_group(worker) -> None:
+    """SIGKILL the worker and everything it started (ffmpeg), which share its process group."""
+    try:
+        os.killpg(worker.pid, signal.SIGKILL)
+    except (ProcessLookupError, PermissionError):
+        worker.kill()
+
+
+def _remove_partials(folder: Path) -> None:
+    """A stopped or failed job's partial output (the upload and transcript stay until the job is forgotten)."""
+    for path in folder.glob("*out*"):
+        try:
+            shutil.rmtree(path) if path.is_dir() and not path.is_symlink() else path.unlink()
+        except OSError:
+            pass
 
 
 class Busy(RuntimeError):

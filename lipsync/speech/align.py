@@ -1000,31 +1000,38 @@ def read_transcript(text: Optional[str]) -> Optional[str]:
     >>> read_transcript("Hello there."), read_transcript("   "), read_transcript(None)
     ('Hello there.', None, None)
     """
+    from ..errors import InputError
+    from .text import MAX_TRANSCRIPT_CHARS, looks_like_path, not_a_transcript
+
     if text is None:
         return None
+    too_long = (f"is over {MAX_TRANSCRIPT_CHARS:,} characters, the limit for a transcript (a 90-minute film's "
+                f"dialogue is ~80,000): split the speech into clips")
     if len(text) < 4096 and "\n" not in text and os.path.isfile(text):
-        from ..errors import InputError
-        from .text import not_a_transcript
-
         try:
             with open(text, "rb") as f:
-                raw = f.read()
+                raw = f.read(4 * MAX_TRANSCRIPT_CHARS + 4)   # UTF-8: at most 4 bytes a character
+                if f.read(1):
+                    raise InputError(f"transcript {too_long}", path=text)
             path, text = text, raw.decode("utf-8-sig")
         except UnicodeDecodeError:
             raise InputError("transcript is not UTF-8 text (binary data?)", path=text) from None
         except OSError as exc:
             raise InputError(f"cannot read transcript: {exc.strerror or exc}", path=text) from None
+        if len(text) > MAX_TRANSCRIPT_CHARS:
+            raise InputError(f"transcript {too_long}", path=path)
         what = not_a_transcript(text)
         if what:
             raise InputError(f"given as a transcript, but this looks like {what}", path=path)
-    elif len(text) < 4096:
-        from .text import looks_like_path
-
-        if looks_like_path(text) and not os.path.exists(text):
-            from ..errors import InputError
-
+    elif len(text) < 4096 and looks_like_path(text):
+        if not os.path.exists(text):
             raise InputError("no such transcript file (a --text value that names a file must exist; "
                              "words with spaces are read as the transcript itself)", path=text)
+        # /dev/zero, /dev/stdin, a fifo, a folder: not a file to read words from
+        raise InputError("is not a regular file (a device, pipe or folder); give a text file or the words",
+                         path=text)
+    elif len(text) > MAX_TRANSCRIPT_CHARS:
+        raise InputError(f"the --text transcript {too_long}")
     return text if text.strip() else None
 
 
@@ -1075,8 +1082,13 @@ def align_samples(pcm: np.ndarray, text: Optional[str] = None, *, quiet: bool = 
     >>> len(al.words), len(al.phones), al.duration
     (0, 0, 1.0)
     """
+    from ..errors import InputError
     from ..phonetics.g2p import is_english
+    from .text import MAX_TRANSCRIPT_CHARS, shown_words
 
+    if text is not None and len(text) > MAX_TRANSCRIPT_CHARS:   # the API's text=, read_transcript's callers
+        raise InputError(f"the transcript is over {MAX_TRANSCRIPT_CHARS:,} characters, the limit for a "
+                         f"transcript: split the speech into clips", path=path)
     if not is_english(lang):
         from .scripts import OTHER_LANGUAGES
 
@@ -1090,7 +1102,7 @@ def align_samples(pcm: np.ndarray, text: Optional[str] = None, *, quiet: bool = 
     missing = tuple(lookup_missing(transcript))
     if missing:
         warnings.warn(f"{path or 'transcript'}: {len(missing)} word(s) not in the dictionary, "
-                      f"pronounced by letter-to-sound rules: {', '.join(missing)}",
+                      f"pronounced by letter-to-sound rules: {shown_words(missing)}",
                       MissingWordsWarning, stacklevel=2)
     return _align_pcm(pcm, transcript, quiet=quiet, path=path, jobs=jobs, missing=missing)
 
@@ -1174,12 +1186,17 @@ def _align_pcm(pcm: np.ndarray, transcript: Tuple[str, ...], *, quiet: bool, pat
         if (failed or strict_failed or len(skipped) > SKIPPED_SHARE_OK * len(transcript)
                 or confidence < LOW_CONFIDENCE):
             what = "does not fit the audio"
+            mismatch = confidence < NO_FIT_CONFIDENCE and (failed or skipped)
             if skipped:
-                what += (f": {len(skipped)} of its {len(transcript)} words were not found and were left out "
-                         f"({_some([show(w) for w in skipped])})")
+                what += (f": {len(skipped)} of its {len(transcript)} words were not found "
+                         + ("(going on leaves them out: " if mismatch else "and were left out (")
+                         + f"{_some([show(w) for w in skipped])})")
             if failed:
+                # a mismatch stops the command line (exit 2) unless --allow-mismatch: say what
+                # going on does, not that it was done (issue 38)
                 what += (f"{',' if skipped else ':'} {failed} of its {len(transcript)} words could not be "
-                         "aligned, and the words recognised there were used instead")
+                         + ("aligned (going on uses the words recognised there instead)" if mismatch else
+                            "aligned, and the words recognised there were used instead"))
             if not (failed or skipped):
                 what = "fits the audio poorly; the alignment is a best effort"
             warnings.warn(f"{path or 'audio'}: the transcript {what} (confidence {confidence:.2f}: the "
@@ -1187,8 +1204,7 @@ def _align_pcm(pcm: np.ndarray, transcript: Tuple[str, ...], *, quiet: bool, pat
                           "and how well they match the sounds)",
                           # all its words found but little of the speech covered: a partial
                           # transcript, worth aligning; words not found as well: the wrong one
-                          TranscriptMismatchWarning if confidence < NO_FIT_CONFIDENCE and (failed or skipped)
-                          else AlignmentWarning,
+                          TranscriptMismatchWarning if mismatch else AlignmentWarning,
                           stacklevel=3)
     return _to_alignment(timings, duration, path, transcript if has_text else tuple(w for w, *_ in timings),
                          recognised=not has_text or failed > 0, confidence=confidence, missing=missing,

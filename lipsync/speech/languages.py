@@ -196,6 +196,7 @@ def align_language(pcm, text: Optional[str], lang: str, *, quiet: bool = True, p
     """
     from ..phonetics.g2p import languages, resolve, transcribe
     from . import align as A
+    from .text import shown_words
 
     code = resolve(lang)
     pcm = A._as_pcm(pcm)
@@ -204,10 +205,10 @@ def align_language(pcm, text: Optional[str], lang: str, *, quiet: bool = True, p
     read = [w for w in words if w.read and w.phones]
     if words and not read:
         raise InputError(f"none of the transcript's words can be read as {languages()[code]} (--lang {lang}): "
-                         f"{', '.join(unread[:8])}", path=path)
+                         f"{shown_words(unread)}", path=path)
     if unread:
         warnings.warn(f"{path or 'transcript'}: {len(unread)} word(s) cannot be read as {languages()[code]} and "
-                      f"were left out: {', '.join(unread[:8])}", UnreadWordsWarning, stacklevel=3)
+                      f"were left out: {shown_words(unread)}", UnreadWordsWarning, stacklevel=3)
     plans: Dict[str, Tuple[str, Tuple[str, ...], List[int]]] = {}
     names: List[str] = []
     for w in read:

@@ -80,14 +80,26 @@ def check_english_script(text: str, words: Sequence[str], *, path: Optional[str]
     ...
     lipsync.errors.InputError: the transcript is written in Cyrillic letters, which the English aligner cannot read: pass the language, for example --lang ru
     """
+    from .text import shown_words
+
     unread = [t for t in text.split() if script_of(t)]
     if not unread:
+        if text.strip() and not words:
+            # emoji, symbols or punctuation alone: recognising words instead would hide the
+            # wrong file or paste (issue 38: an emoji-only transcript went by with exit 0)
+            raise InputError(f"the transcript has no words to say, only symbols or punctuation "
+                             f"({shown_words(text.split(), limit=4)}); give the words spoken, or no --text "
+                             f"to recognise them", path=path)
         return
-    script, suggestion = _SCRIPTS.get(script_of(unread[0]), (script_of(unread[0]).title(), "CODE"))
+    by_script: Dict[str, list] = {}
+    for t in unread:   # every script named, in order of appearance (Han and Arabic are not Cyrillic)
+        by_script.setdefault(script_of(t), []).append(t)
+    named = [_SCRIPTS.get(k, (k.title(), "CODE")) for k in by_script]
+    scripts = " and ".join(dict.fromkeys(name for name, _ in named))
+    suggestion = " or ".join(dict.fromkeys(f"--lang {code}" for _, code in named))
     if not words:
-        raise InputError(f"the transcript is written in {script} letters, which the English aligner cannot read: "
-                         f"pass the language, for example --lang {suggestion}", path=path)
-    shown = ", ".join(unread[:8]) + (f" and {len(unread) - 8} more" if len(unread) > 8 else "")
-    warnings.warn(f"{path or 'transcript'}: {len(unread)} word(s) in {script} letters cannot be read by the "
-                  f"English aligner and were left out ({shown}); pass the language, for example --lang "
+        raise InputError(f"the transcript is written in {scripts} letters, which the English aligner cannot read: "
+                         f"pass the language, for example {suggestion}", path=path)
+    warnings.warn(f"{path or 'transcript'}: {len(unread)} word(s) in {scripts} letters cannot be read by the "
+                  f"English aligner and were left out ({shown_words(unread)}); pass the language, for example "
                   f"{suggestion}", UnreadWordsWarning, stacklevel=3)

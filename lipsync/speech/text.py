@@ -17,7 +17,34 @@ import re
 import unicodedata
 from typing import List, Optional
 
-__all__ = ["normalise_transcript", "number_words", "not_a_transcript", "looks_like_path"]
+__all__ = ["normalise_transcript", "number_words", "not_a_transcript", "looks_like_path", "shown_words",
+           "MAX_TRANSCRIPT_CHARS"]
+
+#: Longest transcript accepted (``--text``, a NAME.txt beside a video, the API's ``text=``),
+#: in characters. A long real script fits: a 90-minute film's dialogue is 12-15 thousand
+#: words (~80,000 characters), an hour of audiobook ~9,000 words; past that the aligner's
+#: memory grows with the words (issue 38: 1 MB took 2.7 GB, 10 MB over 5.9 GB) for speech
+#: nobody renders in one clip. ``lipsync serve`` keeps its own, smaller cap (20,000).
+MAX_TRANSCRIPT_CHARS = 100_000
+
+#: Words a message names at most, and characters of each: a transcript's words are echoed
+#: in warnings, and one 10 MB "word" must not become a 10 MB warning.
+SHOWN_WORDS = 8
+SHOWN_WORD_CHARS = 40
+
+
+def shown_words(words, limit: int = SHOWN_WORDS, width: int = SHOWN_WORD_CHARS) -> str:
+    """Words for a message: the first ``limit``, each cut to ``width`` characters, and how many more.
+
+    Examples
+    --------
+    >>> shown_words(["a", "b" * 50, "c"], limit=2, width=5)
+    'a, bbbb… and 1 more'
+    """
+    words = list(words)
+    cut = [w if len(w) <= width else w[:width - 1] + "\u2026" for w in words[:limit]]
+    more = f" and {len(words) - limit} more" if len(words) > limit else ""
+    return ", ".join(cut) + more
 
 # Typographic quotes and dashes people paste from word processors, folded to ASCII first so
 # the rules below see one apostrophe and one hyphen.
