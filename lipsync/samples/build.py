@@ -42,8 +42,17 @@ THUMB = (16, 12)
 #: distances (lipsync.composite.face.mask_from_mesh's grow, negative). The plate's mask is
 #: grown 0.15 *outside* the jaw for pictures pasted onto the plate; a sample pasted so far
 #: out brings its own moment's background and collar beside the plate's cheek (a visible
-#: stripe along the jaw on GRID s1): inside the jaw line it brings only face.
+#: stripe along the jaw on GRID s1), and so does one shrunk by only 0.05 where the sample's
+#: head had turned a little (docs/strip-dub.png, bbaf3s frame 18 on bgbb3a's plate): inside
+#: by 0.15 it brings only face.
 SAMPLE_GROW = -0.05
+#: ... and held inside an ellipse about the mouth's centre with these semi-axes (eye
+#: distances, horizontal and vertical): the lower-face outline's top corners reach the
+#: cheeks' edge beside the nose, where a sample whose head had turned a little shows
+#: background (docs/strip-dub.png: bbaf3s frame 18 on bgbb3a's plate, a blue streak at the
+#: left cheek with the outline alone, also when shrunk by 0.15). 0.75 keeps the mouth
+#: corners (0.45-0.5 from the centre) and the cheeks beside them; 1.1 down reaches the chin.
+ELLIPSE = (0.75, 1.1)
 #: Its feather, eye distances: wider than the plate mask's 0.12, so that what differs
 #: between a sample's moment and the plate's (light on the skin, a shadow) fades out.
 SAMPLE_FEATHER = 0.12
@@ -60,6 +69,30 @@ def crop_origin(to_bank: np.ndarray, box: Tuple[int, int, int, int], size: Tuple
     x0, y0, x1, y1 = box
     c = np.array([(x0 + x1 - 1) / 2, (y0 + y1 - 1) / 2]) @ inv[:, :2].T + inv[:, 2]
     return int(np.floor(c[0] - (size[0] - 1) / 2 + 0.5)), int(np.floor(c[1] - (size[1] - 1) / 2 + 0.5))
+
+
+def mouth_ellipse(mesh: np.ndarray, shape: Tuple[int, int]) -> np.ndarray:
+    """float32 ``(H, W)``: 1 inside the :data:`ELLIPSE` about the mouth corners' middle of a face
+    ``mesh``, falling smoothly to 0 at its edge over :data:`SAMPLE_FEATHER` eye distances.
+
+    Examples
+    --------
+    >>> from lipsync.face import topology as T
+    >>> p = np.zeros((468, 2)); p[[61, 291]] = [[40, 60], [60, 60]]
+    >>> p[list(T.EYE_UPPER_L + T.EYE_LOWER_L)] = [30, 20]; p[list(T.EYE_UPPER_R + T.EYE_LOWER_R)] = [70, 20]
+    >>> m = mouth_ellipse(p, (100, 100))
+    >>> float(m[60, 50]), float(m[60, 5]), float(m[60, 95])
+    (1.0, 0.0, 0.0)
+    """
+    from ..face.measure import eye_distance
+
+    p = np.asarray(mesh, np.float64)
+    d = float(eye_distance(p[None])[0])
+    cx, cy = p[[61, 291], :2].mean(axis=0)
+    ys, xs = np.mgrid[0:shape[0], 0:shape[1]].astype(np.float64)
+    r = np.hypot((xs - cx) / (ELLIPSE[0] * d), (ys - cy) / (ELLIPSE[1] * d))
+    t = np.clip((1.0 - r) / (SAMPLE_FEATHER / max(ELLIPSE)), 0.0, 1.0)
+    return (t * t * (3.0 - 2.0 * t)).astype(np.float32)
 
 
 def mask_box(mask: np.ndarray) -> Tuple[int, int, int, int]:
@@ -133,6 +166,7 @@ def write_samples(folder: Path, footage, framing, rest_mesh: np.ndarray, rest_im
     from ..composite.face import mask_from_mesh
 
     mask = mask_from_mesh([rest_mesh], rest_image.shape[:2], grow=SAMPLE_GROW, feather=SAMPLE_FEATHER)
+    mask *= mouth_ellipse(rest_mesh, mask.shape)
     to_bank = to_bank_matrices(footage, framing, rest_mesh)
     keys = sorted(to_bank)
     if len(keys) > MAX_SAMPLES:
