@@ -232,7 +232,8 @@ def render_clip(timeline, output: PathLike, *, bank=None, audio: Optional[PathLi
         so the speaker blinks and moves.
     plate_start : float, optional
         Seconds into the idle plate where the clip starts (default: derived from the
-        timeline, :class:`lipsync.Animator`'s ``plate_start``).
+        timeline, :class:`lipsync.Animator`'s ``plate_start``; with ``live``, 0, where a
+        :class:`lipsync.LiveAnimator` starts by default).
 
     Returns
     -------
@@ -290,7 +291,7 @@ def render_clip(timeline, output: PathLike, *, bank=None, audio: Optional[PathLi
 
         anim = LiveClip(bank, timeline, fps=fps, lookahead=None if live is True else live, map=map,
                         method=method, timing=timing, store=store, quiet=quiet,
-                        still=still or not compositor.passthrough)
+                        still=still or not compositor.passthrough, plate_start=plate_start or 0.0)
     else:
         # the idle plate (a bank made from video) only where the frame is the bank's picture itself
         anim = Animator(bank, timeline, fps=fps, map=map, method=method, timing=timing, store=store,
