@@ -53,6 +53,8 @@ FIXTURES = {
     "french.ogg": "tests/data/languages/fleurs-fr-004.ogg", "french.txt": "tests/data/languages/fleurs-fr-004.txt",
     "talk.mp4": "tests/data/grid-s1/bbwm5s.mpg", "new-speech.wav": "samples/balloons.wav",
     "new-speech.txt": "samples/balloons.lab",
+    "spanish.opus": "tests/data/languages/mls-es-13697_11991_000000.opus",
+    "spanish.txt": "tests/data/languages/mls-es-13697_11991_000000.txt",
 }
 #: Made from samples/hello.wav by the bundled ffmpeg (the pages show other containers).
 CONVERTED = ("speech.mp3", "speech.m4a", "speech.flac")

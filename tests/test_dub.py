@@ -112,7 +112,18 @@ def test_compositor_moves_the_masked_face_by_the_pose_and_leaves_the_rest():
     assert np.allclose(compose(pose, pose_inverse(pose)), [[1, 0, 0], [0, 1, 0]])
 
 
-def test_dub_has_the_new_speech_length_and_plays_the_video_back_and_forth(dubbed, cut):
+def _plan(video, n):
+    """The video frame a dub of ``n`` frames shows at each (lipsync.composite.plate_time via
+    the dub's own face track of ``video``)."""
+    from lipsync.pipeline.dubbing import video_frames_for, video_track
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        track = video_track(Path(video), probe_video(video), entry=None, quiet=True)
+    return video_frames_for(track, n)
+
+
+def test_dub_has_the_new_speech_length_and_joins_the_video_where_it_matches(dubbed, cut):
     from lipsync.speech.audio import load_audio
 
     out, report, _ = dubbed
@@ -121,12 +132,17 @@ def test_dub_has_the_new_speech_length_and_plays_the_video_back_and_forth(dubbed
     info = probe_video(out)
     assert info.has_audio and info.size == (360, 288) and info.fps == 25
     assert len(frames) == report.frames == int(np.ceil(speech_s * 25 - 1e-6))
-    assert len(frames) > CUT_FRAMES  # longer than the video: it is played backwards too
+    assert len(frames) > CUT_FRAMES  # longer than the video: it goes on along the plate timeline
     assert not list(out.parent.glob(".dub.mp4.partial*"))  # the frames kept for the way back are gone
     sound_s = len(load_audio(out)) / 16000
     assert abs(sound_s - len(frames) / 25) < 0.05 and abs(sound_s - speech_s) < 0.05
-    # frame by frame, the eye region is the input's own frame pingpong(i): that frame fits
-    # best of all the input's frames, within a few grey levels
+    # frame by frame, the eye region is the input's own frame plan[i]: that frame fits best of
+    # all the input's frames, within a few grey levels; straight on first, then joined
+    from lipsync.composite.plate_time import MIN_RUN_S
+
+    plan = _plan(cut[0], len(frames))
+    through = CUT_FRAMES - int(round(MIN_RUN_S * 25))  # the video played through before any join
+    assert list(plan[:through]) == list(range(through)) and len(set(plan.tolist())) > through
     src = [_grey(f) for f in read_video(cut[0])]
     mesh = FaceMesh()
     y0, y1, x0, x1 = _eye_box(mesh.find(list(read_video(cut[0]))[0]))
@@ -134,7 +150,7 @@ def test_dub_has_the_new_speech_length_and_plays_the_video_back_and_forth(dubbed
     for i, f in enumerate(frames):
         g = _grey(f)[y0:y1, x0:x1]
         d = [np.abs(g - s[y0:y1, x0:x1]).mean() for s in src]
-        j = pingpong(i, CUT_FRAMES)
+        j = int(plan[i])
         diffs.append(d[j])
         assert int(np.argmin(d)) == j or d[j] - min(d) < 0.3, (i, j, int(np.argmin(d)))
     # what the H.264 encoding alone costs there: the input's frames through the same writer
@@ -178,14 +194,15 @@ def test_frames_without_a_face_pass_through_unchanged_with_a_warning(bank, cut, 
         report = dub(cut[1], GRID / f"{SPEECH}.mpg", out, text=_transcript(SPEECH), bank=bank, quiet=True,
                      cache=tmp_path / "cache")
     # output frames showing covered input frames: on the way forwards and on the way back
-    lost = [i for i in range(report.frames) if pingpong(i, CUT_FRAMES) in COVERED]
-    assert list(report.lost) == lost == [30, 31, 32, 33, 65, 66, 67, 68]
+    plan = _plan(cut[1], report.frames)
+    lost = [i for i in range(report.frames) if plan[i] in COVERED]
+    assert list(report.lost) == lost and lost[:4] == [30, 31, 32, 33]
     said = [str(w.message) for w in caught if issubclass(w.category, DubWarning)]
     assert len(said) == 1 and lost_frames_text(lost, 25.0) in said[0] and "30-33 (1.20-1.32 s)" in said[0]
     src = list(read_video(cut[1]))
     frames = list(read_video(out))
     for i in lost:
-        diff = np.abs(frames[i].astype(np.int16) - src[pingpong(i, CUT_FRAMES)]).mean()
+        diff = np.abs(frames[i].astype(np.int16) - src[plan[i]]).mean()
         assert diff < 1.5, (i, diff)
     # a frame with a face has its lower face replaced: it differs from the input below the nose
     assert np.abs(frames[10].astype(np.int16) - src[10])[200:240, 150:210].mean() > 2.0
@@ -230,7 +247,7 @@ def test_render_lives_on_the_plate_and_still_turns_it_off(bank):
     top = min(plate.compositor.roi(p, plate.frames.shape[1:])[1] for p in plate.poses)
     assert top > 0.4 * plate.frames.shape[1]
     for i in (0, 5, n - 1, n + 3, len(live) - 1):
-        assert np.array_equal(live.frame(i)[:top], plate.frames[pingpong(i, n)][:top]), i
+        assert np.array_equal(live.frame(i)[:top], plate.frames[plate.index(i, 25.0, live.plate_line)][:top]), i
     # the plate moves (blinks, the head) through the long silence; the still pictures hold
     tops = [live.frame(i)[:top].astype(np.int16) for i in range(40, len(live), 5)]
     assert max(np.abs(a - tops[0]).mean() for a in tops) > 0.5
@@ -240,7 +257,8 @@ def test_render_lives_on_the_plate_and_still_turns_it_off(bank):
     # the mouth is the morph's: the closure (M) differs from the rest shape below the nose
     y0 = top
     m = int(0.6 * 25)
-    assert np.abs(live.frame(m)[y0:].astype(np.int16) - plate.frames[pingpong(m, n)][y0:]).mean() > 1.0
+    assert np.abs(live.frame(m)[y0:].astype(np.int16) - plate.frames[plate.index(m, 25.0, live.plate_line)][y0:]
+                  ).mean() > 1.0
 
 
 def test_a_broken_cache_entry_is_a_miss(cut, tmp_path):

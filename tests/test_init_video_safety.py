@@ -225,7 +225,7 @@ def test_a_silent_sound_track_is_exit_2_and_the_transcript_is_not_dropped_silent
             "-c:v", "libx264", "-preset", "ultrafast", "-c:a", "aac", silent)
     out = tmp_path / "me"
     code, err = _exit(["init", out, "--video", silent, "--text", "bin blue with m five soon", "--quiet"], capsys)
-    assert code == 2 and f"{silent}: its sound track has no speech" in err
+    assert code == 2 and f"{silent}: its sound track is silent (loudest" in err
     assert "the transcript (--text) could not be used" in err
     assert not out.exists() and sorted(p.name for p in tmp_path.iterdir()) == ["silent.mp4"]
     # the aligner itself says so too (lipsync align --text on silence)

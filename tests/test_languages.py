@@ -83,7 +83,11 @@ def test_numbers_are_read_in_the_language_and_words_in_context():
 def test_language_tags_resolve_and_unknown_ones_list_the_codes():
     assert g2p.resolve("pt-BR") == "pt-br" and g2p.resolve("zh-Hans-CN") in ("cmn", "zh")
     assert g2p.is_english("en-GB") and not g2p.is_english("fr")
-    with pytest.raises(g2p.UnknownLanguageError, match="fr, "):
+    # an unknown code names the closest few (not all ~150) and where the full list is
+    with pytest.raises(g2p.UnknownLanguageError, match=r"did you mean fr \(French") as err:
+        g2p.resolve("frr")
+    assert "lipsync languages" in str(err.value) and len(str(err.value)) < 400
+    with pytest.raises(g2p.UnknownLanguageError, match="`lipsync languages` lists all"):
         g2p.resolve("xx-YY")
 
 

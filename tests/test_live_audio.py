@@ -208,7 +208,7 @@ def test_cues_and_render_live_show_what_the_animator_fed_chunk_by_chunk_shows(ba
     r = _cli("cues", wav, "--live", "--lookahead", "150", "-o", tmp_path / "c.tsv", "--quiet")
     assert r.returncode == 0, r.stderr
     got = [line.split("\t") for line in (tmp_path / "c.tsv").read_text().splitlines()]
-    want = live_cues(specs, 25)
+    want = live_cues([live.cue(k) for k in range(n)], 25)     # each frame's planned shape
     # Rhubarb TSV: one row per cue start (the writer ends with a rest row at the end)
     assert [(float(a), v) for a, v in got][:len(want)] == [(round(a, 3), v) for a, _, v in want]
     r = _cli("render", wav, "--live", "--lookahead", "150", "-o", f"{tmp_path / 'frames'}/", "--quiet")

@@ -98,7 +98,7 @@ def test_a_replayed_frame_is_the_source_frame_warped_once(own, bank):
         if sp.alpha[i] < 1.0 or s.clip[k] != 0:
             continue
         frame = own.frame(i)
-        j = plate.index(i, own.fps)
+        j = plate.index(i, own.fps, own.plate_line)
         x, y = (int(v) for v in s.origin[k])
         # source pixels -> plate pixels, composed here: the affine's crop shift undone
         to_plate = compose(compose(plate.poses[j], s.affine[k]), np.array([[1.0, 0, -x], [0, 1.0, -y]]))

@@ -96,8 +96,13 @@ def test_mic_page_streams_a_recording_and_shows_the_frames_render_live_gives(bro
     # stream the sentence once (the fake device loops the file), then stop
     _wait(browser, f"return window.lipsyncMic.samples / window.lipsyncMic.rate >= {duration:.3f}", timeout=60)
     browser.find_element("id", "stop").click()
-    time.sleep(1.0)
+    # Stop ends the stream ({"type": "end"}): the last look-ahead's frames come, then the count
+    _wait(browser, "return window.lipsyncMic.endFrames !== null")
+    time.sleep(0.5)
     stats = browser.execute_script("return window.lipsyncMic")
+    sent = stats["samples"] / stats["rate"]
+    assert stats["endFrames"] == int(np.ceil(sent * 25 - 1e-9))
+    assert max(stats["numbers"]) == stats["endFrames"] - 1
     assert stats["errors"] == 0, browser.execute_script(STATUS)
     rate, lookahead = stats["rate"], stats["lookahead"]
     got = {int(n): _shape(s) for n, s in stats["specs"].items()}

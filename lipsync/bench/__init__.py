@@ -32,7 +32,8 @@ FIGURES: "Registry[Callable[[Context, List[dict]], None]]" = Registry("benchmark
 
 # Figure modules, run in this order; a module not written yet is skipped.
 _FIGURE_MODULES = ["render", "align", "live", "batch", "editor", "face", "videobank", "alpha", "coarticulation", "ceiling",
-                   "atlas", "inbetween", "languages", "dub", "timing_editor", "sequencer", "samples"]
+                   "atlas", "inbetween", "languages", "dub", "timing_editor", "sequencer", "translation",
+                   "plate_time", "samples"]
 
 
 @dataclass(frozen=True)

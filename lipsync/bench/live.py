@@ -505,3 +505,190 @@ def _events_delay(ctx: Context, rows: List[dict]) -> None:
             row[f"at {at}: final at look-ahead"] = f"{int((need <= live.lookahead + 1e-9).sum())}/{n}"
         row["look-ahead + longest ms"] = round(1000 * (live.lookahead + longest))
         rows.append(row)
+
+
+# --- live cues and the end of a stream (issue 36), serve's memory (issue 38) ------------------
+
+#: Look-aheads of the live cue figure, seconds.
+CUE_LOOKAHEADS = (0.06, 0.1, 0.2, 0.4)
+
+
+def _cli_cue_frames(args, n: int, out: "os.PathLike[str]") -> np.ndarray:
+    """``lipsync cues ARGS -o OUT.tsv`` run in this process; the cue shown at each of ``n``
+    frame centres (25 fps) of the Rhubarb TSV it wrote."""
+    import contextlib
+    import io
+
+    from ..cli import main
+
+    with contextlib.redirect_stderr(io.StringIO()), warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        rc = main(["cues", *map(str, args), "-o", str(out), "--quiet"])
+    if rc != 0:
+        raise RuntimeError(f"lipsync cues {' '.join(map(str, args))} exited {rc}")
+    shown = np.full(n, "X", dtype=object)
+    for line in open(out, encoding="utf-8"):
+        parts = line.split()
+        if len(parts) == 2:
+            shown[max(int(np.ceil(float(parts[0]) * 25 - 0.5 - 1e-9)), 0):] = parts[1]
+    return shown
+
+
+def _wav(path, pcm) -> None:
+    import wave
+
+    with wave.open(str(path), "wb") as w:
+        w.setnchannels(1), w.setsampwidth(2), w.setframerate(16000)
+        w.writeframes(np.asarray(pcm).astype("<i2").tobytes())
+
+
+@FIGURES.decorator("live_cues")
+def _live_cues(ctx: Context, rows: List[dict]) -> None:
+    """``lipsync cues AUDIO --live`` against the transcript-aligned cues (``lipsync cues AUDIO
+    --text T``) on speech frames (frames whose aligned cue is not rest X), held-out GRID
+    sentences (:func:`lipsync.bench.grid.held_out`; the choices were made on
+    :data:`~lipsync.bench.grid.BANK_CLIPS`), per look-ahead: the shapes the session fixed
+    (:meth:`lipsync.LiveAnimator.cue`, what cues --live writes) beside the nearer viseme of
+    each rendered frame (what it wrote before), with the toon bank and with visemes/grid-s1
+    (its dominance timing blends shapes), and offline without a transcript (``lipsync cues
+    AUDIO``). Also each stream's frame count against the offline render's."""
+    from .._data import default_bank_dir
+    from ..banks.bank import Bank
+    from ..phonetics.phonemes import DEFAULT_MAP, load_map, resolve_visemes
+    from ..pipeline.liveclip import live_session
+    from ..speech.audio import load_audio
+    from . import grid as G
+
+    clips = [c for c in G.held_out() if G.video(c).is_file()][:6 if ctx.quick else 30]
+    banks = {"toon": Bank.load(default_bank_dir()), "grid-s1": Bank.load(default_bank_dir().parent / "grid-s1")}
+    if not clips or banks["grid-s1"].plate is None:
+        rows.append({"figure": "live_cues", "case": "skipped: no GRID clips"})
+        return
+    base = load_map(DEFAULT_MAP)
+    to_map = {k: {b: m for m, b in resolve_visemes(base, bank.names)[0].items()} for k, bank in banks.items()}
+    score = {"offline": []}
+    counts_equal = 0
+    for c in clips:
+        pcm = load_audio(G.video(c))
+        n = int(np.ceil(len(pcm) / 16000 * 25 - 1e-9))
+        wav = ctx.tmp / f"{c}.wav"
+        _wav(wav, pcm)
+        ref = _cli_cue_frames([wav, "--text", G.transcript(c)], n, ctx.tmp / "ref.tsv")
+        speech = ref != "X"
+        agree = lambda track: float(np.mean(np.asarray(track, dtype=object)[speech] == ref[speech]))  # noqa: E731
+        score["offline"].append(agree(_cli_cue_frames([wav], n, ctx.tmp / "off.tsv")))
+        for L in CUE_LOOKAHEADS:
+            for name, bank in banks.items():
+                live, frames = live_session(pcm, bank, lookahead=L)
+                counts_equal += frames == n
+                m = to_map[name]
+                cues = [m.get(live.cue(k), live.cue(k)) for k in range(n)]
+                near = [m.get(v, v) for v in _shape_track([live.spec(k) for k in range(n)])]
+                score.setdefault((L, name, "cue"), []).append(agree(cues))
+                score.setdefault((L, name, "near"), []).append(agree(near))
+    off = 100 * statistics.mean(score["offline"])
+    for L in CUE_LOOKAHEADS:
+        row = {"figure": "live_cues", "look-ahead ms": round(L * 1000), "held-out clips": len(clips),
+               "offline, no transcript %": round(off, 1)}
+        for name in banks:
+            cue = 100 * statistics.mean(score[(L, name, "cue")])
+            row[f"{name}: live cues %"] = round(cue, 1)
+            row[f"{name}: minus offline, points"] = round(cue - off, 1)
+            row[f"{name}: nearer viseme of the frame %"] = round(100 * statistics.mean(score[(L, name, "near")]), 1)
+        rows.append(row)
+    rows.append({"figure": "live_cues", "case": "streams whose frame count = the offline render's",
+                 "count": f"{counts_equal}/{len(clips) * len(CUE_LOOKAHEADS) * len(banks)}"})
+
+
+def _rss_of(pid: int) -> float:
+    """Resident memory of process ``pid`` in MB (Linux ``/proc``)."""
+    with open(f"/proc/{pid}/status") as f:
+        for line in f:
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1]) / 1024
+    return float("nan")
+
+
+async def _memory_round(ws_url: str, origin: str, sessions: int, pcm: np.ndarray, pid: int) -> float:
+    """Open ``sessions`` audio sessions on a running server, stream ``pcm`` and end each;
+    the server's resident MB with all of them open; then close them."""
+    import asyncio
+    import json
+
+    import websockets
+
+    socks = [await websockets.connect(ws_url, origin=origin, max_size=2**24) for _ in range(sessions)]
+    try:
+        for ws in socks:
+            await ws.recv()                                        # ready
+            await ws.send(json.dumps({"type": "config", "audio_rate": 16000}))
+
+        async def until(ws, kind):
+            while True:
+                msg = await asyncio.wait_for(ws.recv(), 120)
+                if isinstance(msg, str) and json.loads(msg)["type"] == kind:
+                    return
+
+        for ws in socks:
+            await until(ws, "config")                              # the recogniser is loaded
+            await ws.send(pcm.astype("<i2").tobytes())
+            await ws.send(json.dumps({"type": "end"}))
+        for ws in socks:
+            await until(ws, "end")
+        return _rss_of(pid)
+    finally:
+        for ws in socks:
+            await ws.close()
+
+
+@FIGURES.decorator("serve_memory")
+def _serve_memory(ctx: Context, rows: List[dict]) -> None:
+    """``lipsync serve``'s resident memory over three rounds of 32 audio sessions (each loads
+    a recogniser, streams 1 s of speech and ends its stream), open and after all closed,
+    against the server's memory before the first (issue 38 item 10)."""
+    import asyncio
+    import re
+    import subprocess
+    import sys
+
+    import httpx
+
+    from ..speech.audio import load_audio
+    from . import grid as G
+
+    sessions = 8 if ctx.quick else 32
+    clip = [c for c in G.held_out() if G.video(c).is_file()][0]
+    pcm = load_audio(G.video(clip))[:16000]
+    proc = subprocess.Popen([sys.executable, "-m", "lipsync", "serve", "--port", "0", "--max-sessions",
+                             str(sessions), "--quiet"], stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+    try:
+        line = proc.stdout.readline()
+        m = re.search(r"(http://127\.0\.0\.1:\d+)/\?token=(\S+)", line)
+        if m is None:
+            rows.append({"figure": "serve_memory", "case": f"skipped: serve printed {line.strip()[:80]!r}"})
+            return
+        origin, token = m.group(1), m.group(2)
+        ws_url = origin.replace("http://", "ws://") + f"/ws/live?token={token}"
+
+        def settle():
+            for _ in range(200):
+                if httpx.get(f"{origin}/api/status?token={token}").json()["sessions"] == 0:
+                    break
+                time.sleep(0.05)
+            time.sleep(0.5)
+            return _rss_of(proc.pid)
+
+        start = settle()
+        for k in range(3):
+            open_mb = asyncio.run(_memory_round(ws_url, origin, sessions, pcm, proc.pid))
+            closed = settle()
+            rows.append({"figure": "serve_memory", "round": k + 1, "audio sessions": sessions,
+                         "RSS before the first MB": round(start), "RSS all open MB": round(open_mb),
+                         "RSS all closed MB": round(closed), "closed minus before MB": round(closed - start),
+                         "per open session MB": round((open_mb - start) / sessions, 1)})
+    finally:
+        proc.terminate()
+        try:
+            proc.wait(10)
+        except subprocess.TimeoutExpired:  # pragma: no cover
+            proc.kill()

@@ -94,7 +94,7 @@ def _frames(bank, clip: str, method: str) -> tuple:
         for i in range(n):
             s = anim.specs[i]
             mouth = anim.renderer.render(s.from_viseme, s.to_viseme, float(round(s.alpha)))
-            j = anim.plate.index(i, fps)
+            j = anim.plate.index(i, fps, anim.plate_line)
             buf = anim.plate.frames[j].copy()
             out.append(anim.plate.compositor.apply_prepared(mouth, buf, anim.plate._prepared[j]))
         return out, anim

@@ -170,18 +170,20 @@ def _live_cues(args: argparse.Namespace, name: str, fps: float) -> int:
     from .._data import default_bank_dir
     from ..banks.bank import Bank
     from ..errors import InputError
-    from ..pipeline.liveclip import live_cues, live_specs
+    from ..pipeline.liveclip import live_cues, live_shapes
     from ..phonetics.phonemes import DEFAULT_MAP, load_map, resolve_visemes
 
     if WRITERS.get(name).name == "atlas" or args.atlas is not None:
         raise InputError("--live writes mouth cues; --format atlas is for timelines")
     bank = Bank.load(args.bank or default_bank_dir())
     base = load_map(args.map or DEFAULT_MAP)
-    specs = live_specs(args.timeline, bank, fps=fps, lookahead=_lookahead(args), map=args.map,
-                       timing=args.timing, quiet=args.quiet)
+    # each frame's shape as the session fixed it (the planned segment, as offline cues are:
+    # not the nearer viseme of a blend, which a timing model makes lag the sound)
+    shapes = live_shapes(args.timeline, bank, fps=fps, lookahead=_lookahead(args), map=args.map,
+                         timing=args.timing, quiet=args.quiet)
     names, _ = resolve_visemes(base, bank.names)
     to_map = {b: m for m, b in names.items()}
-    cues = [(a, b, to_map.get(v, v)) for a, b, v in live_cues(specs, fps)]
+    cues = [(a, b, to_map.get(v, v)) for a, b, v in live_cues(shapes, fps)]
     write_names: Dict[str, str] = {}
     if WRITERS.get(name).name == "moho":
         write_names = {v: aliases[0] for v, aliases in base.aliases.items() if aliases}
@@ -189,7 +191,7 @@ def _live_cues(args: argparse.Namespace, name: str, fps: float) -> int:
 
     write_cues(cues, args.output, name, rest=to_map.get(bank.rest, bank.rest), fps=fps, tier=args.tier_name,
                sound_file=os.path.abspath(args.timeline), names=write_names,
-               closures=[to_map.get(c, c) for c in base.closures], duration=len(specs) / fps)
+               closures=[to_map.get(c, c) for c in base.closures], duration=len(shapes) / fps)
     if not args.quiet:
         print(f"lipsync: wrote {len(cues)} live cues ({WRITERS.get(name).name}) to {args.output}", file=sys.stderr)
     return 0

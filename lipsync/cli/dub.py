@@ -6,7 +6,8 @@ import argparse
 import sys
 
 from ..pipeline.clip import DEFAULT_CRF, DEFAULT_PRESET
-from ._common import TIMING_HELP, add_jobs_option, add_lang_option, add_quiet_option, add_store_option
+from ._common import (TIMING_HELP, add_jobs_option, add_mismatch_option, add_quiet_option, add_store_option,
+                      lang_code)
 
 
 def add_parser(sub) -> None:
@@ -16,8 +17,8 @@ def add_parser(sub) -> None:
     p = sub.add_parser("dub", help="re-voice a video: its own frames, the lower face driven by new speech",
                        description="Keep VIDEO's frames (head motion, blinks, background) and replace the "
                                    "speaker's lower face by their mouth morphed to SPEECH; the output carries "
-                                   "SPEECH and lasts as long as it (the video plays backwards and forwards when "
-                                   "the speech is longer). Without --bank a bank is made from VIDEO (lipsync init "
+                                   "SPEECH and lasts as long as it (when the speech is longer the video goes on "
+                                   "where its frames match, never mid-blink). Without --bank a bank is made from VIDEO (lipsync init "
                                    "--video) and cached.")
     p.add_argument("video", metavar="VIDEO", help="video of the speaker facing the camera (any format ffmpeg reads)")
     p.add_argument("--audio", required=True, metavar="SPEECH",
@@ -41,7 +42,16 @@ def add_parser(sub) -> None:
                         f"(default: {DEFAULT_PRESET})")
     p.add_argument("--cache", default=None, metavar="DIR",
                    help="cache of face tracks and banks made from videos (default: ~/.cache/lipsync/dub)")
-    add_lang_option(p)
+    p.add_argument("--lang", type=lang_code, default=None, metavar="CODE",
+                   help="language of the new speech (SPEECH, --text) as a BCP 47 tag (es, fr, pt-BR, zh, ...); "
+                        "default English. Other languages need the optional espeak-ng extra "
+                        "(pip install 'lipsync[lang]')")
+    p.add_argument("--video-lang", type=lang_code, default=None, metavar="CODE",
+                   help="language of what is said in VIDEO, for making its bank (default English; when its "
+                        "words cannot be recognised the bank is made from the phones heard, or the lips alone)")
+    p.add_argument("--plate-start", type=float, default=None, metavar="SECONDS",
+                   help="where in VIDEO the output starts (default 0)")
+    add_mismatch_option(p)
     add_store_option(p)
     add_jobs_option(p)
     add_quiet_option(p)
@@ -61,8 +71,8 @@ def run(args: argparse.Namespace) -> int:
     out = args.output or os.path.splitext(args.video)[0] + "-dub.mp4"
     report = dub(args.video, args.audio, out, text=args.text, bank=args.bank, video_text=args.video_text,
                  map=args.map, timing=args.timing, crf=args.crf, preset=args.preset, store=args.store,
-                 jobs=args.jobs, quiet=args.quiet, cache=args.cache, lang=args.lang,
-                 samples=args.samples)
+                 jobs=args.jobs, quiet=args.quiet, cache=args.cache, lang=args.lang, video_lang=args.video_lang,
+                 plate_start=args.plate_start, samples=args.samples)
     if not args.quiet:
         print(report.summary(), file=sys.stderr)
     return 0

@@ -47,6 +47,9 @@ def add_parser(sub) -> None:
     g.add_argument("--still", action="store_true",
                    help="a bank made from video: show its still pictures instead of compositing the mouth onto "
                         "its idle plate (the speaker's own video: blinks, head motion)")
+    g.add_argument("--plate-start", type=float, default=None, metavar="SECONDS",
+                   help="a bank made from video: where on its idle plate the clip starts (default: a place "
+                        "derived from the input, so clips of a series do not blink in unison)")
     p.add_argument("--crf", type=int, default=DEFAULT_CRF, help=f"H.264 quality, lower is better (default: {DEFAULT_CRF})")
     p.add_argument("--preset", default=DEFAULT_PRESET,
                    help=f"x264 speed preset: x264's (ultrafast ... veryslow) or talking-head (default: {DEFAULT_PRESET})")
@@ -95,7 +98,19 @@ def run(args: argparse.Namespace) -> int:
                          map=args.map, method=args.method, timing=args.timing, format=args.format,
                          crf=args.crf, preset=args.preset, store=args.store, jobs=args.jobs,
                          quiet=args.quiet, timeline_options=args, background=background, composite=composite,
-                         still=args.still, samples=args.samples)
+                         still=args.still, plate_start=_plate_start(args.plate_start),
+                         samples=args.samples)
     if not args.quiet:
         print(report.summary(), file=sys.stderr)
     return 0
+
+
+def _plate_start(value):
+    """``--plate-start``: a finite number of seconds, 0 or more (exit 2 otherwise)."""
+    import math
+
+    from ..errors import InputError
+
+    if value is not None and not (math.isfinite(value) and value >= 0):
+        raise InputError(f"--plate-start must be a number of seconds, 0 or more (got {value})")
+    return value

@@ -7,6 +7,9 @@
 * :mod:`lipsync.composite.plate` -- the morphed lower face onto frames of real video, per
   frame and ROI-only: a bank's idle plate (``lipsync render``) and the video being re-voiced
   (``lipsync dub``, :mod:`lipsync.pipeline.dubbing`).
+* :mod:`lipsync.composite.plate_time` -- which plate frame each output frame shows: where a
+  clip starts (``--plate-start``), and a plate shorter than the output joined to itself
+  where its frames match, never mid-blink (Video Textures), instead of ping-pong.
 
 The names below are the ones ``lipsync.composite`` has always had.
 """

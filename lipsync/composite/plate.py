@@ -312,30 +312,67 @@ class Plate:
     compositor : PlateCompositor
     """
 
-    def __init__(self, frames: np.ndarray, poses: np.ndarray, fps: float, compositor: PlateCompositor):
+    def __init__(self, frames: np.ndarray, poses: np.ndarray, fps: float, compositor: PlateCompositor,
+                 eyes: Optional[np.ndarray] = None):
         self.frames, self.poses, self.fps, self.compositor = frames, poses, float(fps), compositor
         self._prepared = None if compositor is None else [compositor.prepare(p, frames.shape[1:]) for p in poses]
         #: The box of the morphed frame the compositor reads (a :class:`lipsync.morphing.store.Crop`).
         self.region = None if compositor is None else compositor.region
+        #: Eye opening per frame (:func:`lipsync.face.measure.eye_opening`), for the blinks.
+        self.eyes = None if eyes is None else np.asarray(eyes, np.float64)
+        self._times = None
+        self._default_line = None
+        self._lock = threading.Lock()
 
     def __len__(self) -> int:
         return len(self.frames)
 
-    def index(self, i: int, fps: float) -> int:
-        """The plate frame shown at output frame ``i`` of a render at ``fps`` (output time
-        ``i / fps`` on the plate's own clock, played forwards and backwards).
+    @property
+    def times(self):
+        """The plate's :class:`lipsync.composite.plate_time.PlateTimes` (made once): joins
+        judged on the pixels above the lower-face mask (grey, 4x smaller), blinks on
+        :attr:`eyes`."""
+        with self._lock:
+            if self._times is None:
+                from .plate_time import PlateTimes
+
+                top = self.compositor.box[1] if self.compositor is not None else self.frames.shape[1] // 2
+                grey = self.frames[:, :max(top, 1), :, 1].astype(np.float32)
+                size = (max(1, grey.shape[2] // 4), max(1, grey.shape[1] // 4))
+                small = np.stack([cv2.resize(g, size, interpolation=cv2.INTER_AREA) for g in grey])
+                eyes = self.eyes if self.eyes is not None and len(self.eyes) == len(self) else np.ones(len(self))
+                self._times = PlateTimes(small.reshape(len(self), -1), eyes, self.fps)
+            return self._times
+
+    def timeline(self, start: float = 0.0):
+        """A clip's :class:`lipsync.composite.plate_time.PlateTimeline` starting at
+        ``start`` seconds on the plate (wrapped to its length)."""
+        from .plate_time import PlateTimeline
+
+        return PlateTimeline(self.times, start=(float(start) * self.fps / max(len(self), 1)) % 1.0)
+
+    def index(self, i: int, fps: float, timeline=None) -> int:
+        """The plate frame shown at output frame ``i`` of a render at ``fps``: output time
+        ``i / fps`` on the plate's own clock, along ``timeline`` (a
+        :class:`~lipsync.composite.plate_time.PlateTimeline`; default: one from the plate's
+        start) -- straight on, then joined where the plate's frames match, never ping-pong.
 
         Examples
         --------
         >>> p = Plate(np.zeros((3, 2, 2, 3), np.uint8), np.zeros((3, 2, 3)), 25.0, None)
-        >>> [p.index(i, 25.0) for i in range(6)], p.index(4, 50.0)
-        ([0, 1, 2, 1, 0, 1], 2)
+        >>> [p.index(i, 25.0) for i in range(3)], p.index(2, 50.0)
+        ([0, 1, 2], 1)
         """
-        return pingpong(int(np.floor(i * self.fps / fps + 1e-9)), len(self.frames))
+        k = int(np.floor(i * self.fps / fps + 1e-9))
+        if timeline is None:
+            if self._default_line is None:
+                self._default_line = self.timeline(0.0)
+            timeline = self._default_line
+        return timeline.frame(k)
 
-    def render_into(self, i: int, fps: float, mouth: np.ndarray, out: np.ndarray) -> np.ndarray:
+    def render_into(self, i: int, fps: float, mouth: np.ndarray, out: np.ndarray, timeline=None) -> np.ndarray:
         """Output frame ``i``: plate frame :meth:`index` with ``mouth``'s lower face on it."""
-        j = self.index(i, fps)
+        j = self.index(i, fps, timeline)
         np.copyto(out, self.frames[j])
         return self.compositor.apply_prepared(mouth, out, self._prepared[j])
 
@@ -381,4 +418,28 @@ def load_plate(bank) -> Optional[Plate]:
             lut = colour_lut(1.0 / gains)
             for f in frames:
                 cv2.LUT(f, lut, dst=f)
-    return Plate(frames, poses, fps, PlateCompositor(mask))
+    eyes = doc.get("eyes")
+    if isinstance(eyes, list) and len(eyes) == len(frames):
+        eyes = np.array([np.nan if e is None else e for e in eyes], np.float64)
+    else:
+        eyes = plate_eyes(frames)  # a bank made before plate.json kept them
+    return Plate(frames, poses, fps, PlateCompositor(mask), eyes=eyes)
+
+
+def plate_eyes(frames: np.ndarray) -> np.ndarray:
+    """Eye opening of every plate frame (:func:`lipsync.face.measure.eye_opening` of the face
+    mesh tracked through them; NaN without a face): what blinks are found from."""
+    import warnings
+
+    from ..face.measure import eye_opening
+    from ..face.track import track_frames
+
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            tr = track_frames(iter(frames), fps=25.0, smooth=False)
+    except Exception:  # no face to be found: no blinks known, joins still judged on pixels
+        return np.full(len(frames), np.nan)
+    out = eye_opening(tr.points)
+    out[~tr.found] = np.nan
+    return out

@@ -35,7 +35,7 @@ from ..motion.sequencer import FrameSpec
 from ..morphing.store import FlowStore
 from ..motion.timeline import MAX_TIMELINE_S, PHONEME, VISEME, Segment, Timeline
 from .causal import LOOKAHEAD_S, CausalSequencer
-from .pool import RendererPool
+from .pool import RendererPool, shared_plate
 
 #: What a pushed label may be; ``None`` (auto) tries them in the order of
 #: :meth:`LiveAnimator.resolve`.
@@ -118,6 +118,18 @@ class LiveAnimator:
         timelines) or as it ends (a recogniser's output). Only :attr:`delay` depends on it.
     longest_event : float
         With ``events_at="end"``: the longest event expected, seconds (default 0.3).
+    still : bool
+        Show the bank's still pictures even when it has an idle plate (bank.yaml ``plate:``,
+        banks made from video). By default frame n of such a bank is the plate frame
+        :meth:`lipsync.composite.plate.Plate.index` shows at frame n with the morphed lower
+        face on it, exactly as the offline :class:`lipsync.Animator` and ``lipsync render
+        --live`` make it: the speaker blinks and moves on the session's clock. The plate is
+        decoded once per process and shared by every animator of the bank
+        (:func:`lipsync.live.pool.shared_plate`).
+    plate_start : float
+        Seconds into the idle plate where the session starts (as ``--plate-start``; default
+        0, where ``lipsync render --live`` starts): sessions given different starts do not
+        blink in unison (``lipsync serve`` gives each session its own).
 
     Notes
     -----
@@ -136,7 +148,7 @@ class LiveAnimator:
                  method: str = "flow", lookahead: Optional[float] = None, store: Optional[FlowStore] = None,
                  renderer: Optional[RendererPool] = None, prepare: Optional[bool] = None,
                  audio_lookahead: Optional[float] = None, events_at: str = "start",
-                 longest_event: float = LONGEST_EVENT_S):
+                 longest_event: float = LONGEST_EVENT_S, still: bool = False, plate_start: float = 0.0):
         self.bank = bank if isinstance(bank, Bank) else Bank.load(bank)
         self.pmap = map if isinstance(map, PhonemeMap) else load_map(map or DEFAULT_MAP)
         self._map_path = map if isinstance(map, (str, os.PathLike)) and os.path.isfile(map) else None
@@ -156,6 +168,14 @@ class LiveAnimator:
             from ..morphing.preprocess import preprocess
 
             preprocess(self.bank, store=self.renderer.store, quiet=True, normalised=self.renderer.nb)
+        #: The idle plate frames are composited onto (None: the still pictures).
+        self.plate = None if still else shared_plate(self.bank)
+        if not (isinstance(plate_start, (int, float)) and np.isfinite(plate_start) and plate_start >= 0):
+            raise InputError(f"plate_start must be a number of seconds, 0 or more (got {plate_start!r})")
+        #: Where on the plate the session starts, seconds.
+        self.plate_start = float(plate_start)
+        self._plate_line = None if self.plate is None else self.plate.timeline(self.plate_start)
+        self._mouth = threading.local()   # each render thread its own morphed frame
         self._state = threading.Lock()   # the track and its plan (the pool guards the renderers)
         self._warned: set = set()
         self._words = _word_phones()
@@ -173,10 +193,12 @@ class LiveAnimator:
                              f"got {audio_lookahead!r} s")
         self._fe = None                 # the audio front-end, from the first feed_audio
         self._shown: List[FrameSpec] = []   # audio: frames fixed when their audio came
+        self._shapes: List[str] = []        # ... and the shape (cue) each shows
         self._committed_f = 0           # audio: 10 ms frames whose phones are pushed
         self._events: List[Tuple[float, float, str]] = []   # mixed: events not yet pushed
         self._tail: Optional[List[Tuple[float, float, str]]] = None   # provisional segments
         self._finished = False          # audio: finish_audio was called
+        self._closed = False            # audio: close was called (the recogniser freed)
 
     # ------------------------------------------------------------------ input
     def push(self, start, end: Optional[float] = None, label: Optional[str] = None, *,
@@ -413,8 +435,8 @@ class LiveAnimator:
         from .audio import AudioFrontEnd
 
         with self._state:
-            if self._finished:
-                raise InputError("the audio has ended (finish_audio was called); start a new animator")
+            if self._finished or self._closed:
+                raise InputError("the audio has ended (finish_audio or close was called); start a new animator")
             if self._fe is None:
                 self._fe = AudioFrontEnd()
             self._fe.add(samples, sample_rate)
@@ -427,30 +449,87 @@ class LiveAnimator:
                     n = len(self._shown)
                     if n / self.fps + self.audio_lookahead > now + 1e-9:
                         break
-                    self._shown.append(self._provisional(n))
+                    self._fix(n)
                     due.append(n)
             return due
 
-    def finish_audio(self) -> None:
-        """The audio has ended: its last phones are decided and every later frame follows
-        from all of it (``lipsync render --live`` calls this after the file's last chunk).
+    def finish_audio(self) -> List[int]:
+        """The audio has ended: decide its last phones and deliver every remaining frame.
+
+        The front-end processes the last partial block (completed with silence) and ends the
+        phone loop's utterance; everything heard is pushed; then every frame up to the end
+        of the audio is fixed from all of it -- the last look-ahead's frames (about
+        ``audio_lookahead * fps`` of them), which no later audio would ever have made due.
+        After it, the frames fixed by :meth:`feed_audio` and by this call are exactly the
+        ``ceil(duration * fps)`` frames of the audio fed (``duration`` = samples fed / their
+        rate), as many as an offline render of that audio has (``lipsync render --live``
+        and ``lipsync cues --live`` call it after the file's last chunk; a ``lipsync
+        serve`` session on a ``{"type": "end"}`` message). More audio is then refused; a
+        second call returns ``[]``.
+
+        Returns
+        -------
+        list of int
+            The frame numbers this call fixed, in order (each ``spec(n)`` / ``frame(n)`` is
+            then final): what a streaming caller still has to show. Empty when no audio was
+            fed.
 
         Examples
         --------
         >>> import numpy as np
         >>> from lipsync._data import default_bank_dir
         >>> live = LiveAnimator(default_bank_dir(), prepare=False)
-        >>> _ = live.feed_audio(np.zeros(3200, np.int16)); live.finish_audio()
-        >>> live.spec(4).shown, live.is_final(0.16)
-        ('X', True)
+        >>> due = live.feed_audio(np.zeros(3200, np.int16))      # 0.2 s: frame 0 is due
+        >>> due, live.finish_audio(), live.spec(4).shown, live.is_final(0.16)
+        ([0], [1, 2, 3, 4], 'X', True)
         """
+        from ..motion.frames import frame_count
+
         with self._state:
-            if self._fe is None:
-                return
-            self._fe.rec.restart()
+            if self._fe is None or self._finished or self._closed:
+                return []
+            self._fe.end()
             self._tail = None
             self._commit(self._fe.frames, flush=True)
             self._finished = True
+            total = frame_count(self._fe.duration, self.fps)
+            due = list(range(len(self._shown), total))
+            for n in due:
+                self._fix(n)
+            return due
+
+    @property
+    def frames_total(self) -> Optional[int]:
+        """After :meth:`finish_audio`: how many frames the stream has (``ceil(duration * fps)``,
+        the offline render's count); None while the audio goes on."""
+        if not self._finished:
+            return None
+        from ..motion.frames import frame_count
+
+        return max(len(self._shown), frame_count(self._fe.duration, self.fps))
+
+    def close(self) -> None:
+        """Free the audio front-end (the recogniser's ~30 MB) and give the memory back to the
+        system (:func:`lipsync.live.audio.trim_memory`); a server calls it when a session
+        ends. Frames already fixed stay readable; more audio is refused.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from lipsync._data import default_bank_dir
+        >>> live = LiveAnimator(default_bank_dir(), prepare=False)
+        >>> _ = live.feed_audio(np.zeros(3200, np.int16)); live.close()
+        >>> live.spec(0).shown
+        'X'
+        """
+        from .audio import trim_memory
+
+        with self._state:
+            if self._fe is None or self._closed:
+                return
+            self._fe.close()
+            self._closed = True
+        trim_memory()
 
     @property
     def audio_time(self) -> float:
@@ -501,6 +580,17 @@ class LiveAnimator:
         fe.forget(new_f)
 
     def _provisional(self, n: int) -> FrameSpec:
+        return self._seq.spec_with(n, self._tail_segments())
+
+    def _provisional_shape(self, n: int) -> str:
+        return self._seq.cue_with(n, self._tail_segments())
+
+    def _fix(self, n: int) -> None:
+        """Frame ``n`` (the next) is due: fix its spec and its shape from what is heard now."""
+        self._shown.append(self._provisional(n))
+        self._shapes.append(self._provisional_shape(n))
+
+    def _tail_segments(self) -> List[Tuple[float, float, str]]:
         if self._tail is None:
             runs = self._fe.phones(self._committed_f) if self._fe is not None else []
             self._tail = _overlay(self._phone_segments(runs, self._committed_f), self._events)
@@ -510,7 +600,7 @@ class LiveAnimator:
                 start = max(self._tail[-1][1] if self._tail else 0.0, self._seq.horizon)
                 if end > start:
                     self._tail.append((start, end, self.bank.rest))
-        return self._seq.spec_with(n, self._tail)
+        return self._tail
 
     def _hold_events(self, segs) -> None:
         """Mixed session: keep events until the audio's phones around them are pushed."""
@@ -525,6 +615,31 @@ class LiveAnimator:
         self._events.extend((max(a, h), b, v) for a, b, v in segs if b > h)
         self._tail = None
 
+    def cue(self, n: int) -> str:
+        """The mouth shape frame ``n`` shows as a cue (a viseme of the bank): the planned
+        segment at the middle of the frame's interval
+        (:meth:`lipsync.live.causal.CausalSequencer.cue`) -- what a cartoon that swaps
+        whole drawings shows, and what ``lipsync cues AUDIO --live`` writes -- rather
+        than the blend :meth:`spec` renders (with a timing model such as ``dominance`` a
+        frame is a mixture of several segments' shapes, and its nearer viseme lags or leads
+        the sound). Audio: fixed with the frame (:meth:`feed_audio`).
+
+        Examples
+        --------
+        >>> from lipsync._data import default_bank_dir
+        >>> live = LiveAnimator(default_bank_dir(), prepare=False)
+        >>> live.push(0.0, 0.3, "M"); live.push(0.3, 0.7, "AA"); live.push(0.7, 1.0, "sil")
+        >>> [live.cue(n) for n in (2, 10, 30)]
+        ['A', 'D', 'X']
+        """
+        n = max(int(n), 0)
+        with self._state:
+            if self._fe is None:
+                return self._seq.cue(n)
+            if n < len(self._shapes):
+                return self._shapes[n]
+            return self._provisional_shape(n)
+
     def spec_at(self, t: float) -> FrameSpec:
         """The FrameSpec shown at time ``t``."""
         return self.spec(self.index(t))
@@ -532,7 +647,17 @@ class LiveAnimator:
     def frame(self, n: int, *, out: Optional[np.ndarray] = None) -> np.ndarray:
         """Frame ``n`` as RGB ``uint8`` (RGBA for a transparent bank; a new array unless ``out`` is given)."""
         spec = self.spec(n)
-        return self.renderer.render(spec.from_viseme, spec.to_viseme, spec.alpha, out=out)
+        if self.plate is None:
+            return self.renderer.render(spec.from_viseme, spec.to_viseme, spec.alpha, out=out)
+        if out is None:
+            out = np.empty(self.renderer.shape + (self.renderer.channels,), np.uint8)
+        mouth = getattr(self._mouth, "frame", None)
+        if mouth is None:
+            mouth = self._mouth.frame = np.empty_like(out)
+        # the plate frame due at the session's clock (frame n, as the offline Animator's frame
+        # n), with only the lower face's box of the morph made and composited onto it
+        self.renderer.render(spec.from_viseme, spec.to_viseme, spec.alpha, out=mouth, region=self.plate.region)
+        return self.plate.render_into(max(int(n), 0), self.fps, mouth, out, self._plate_line)
 
     def frame_at(self, t: float, *, out: Optional[np.ndarray] = None) -> np.ndarray:
         """The frame for playback time ``t`` seconds, RGB ``uint8`` ``(H, W, 3)`` (RGBA ``(H, W, 4)``

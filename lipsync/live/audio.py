@@ -221,10 +221,16 @@ class PhoneStream:
         return self._cur
 
     def close(self) -> None:
+        """End the utterance and free the decoder (its ~30 MB acoustic model); the phones
+        found stay readable."""
+        if self.d is None:
+            return
+        self.current()   # the phones so far, kept (read without the decoder from now on)
         try:
             self.d.end_utt()
         except RuntimeError:  # pragma: no cover - no utterance running
             pass
+        self.d = None
 
 
 class AudioFrontEnd:
@@ -248,6 +254,7 @@ class AudioFrontEnd:
         self.blocks = 0
         self._closed_since: Optional[int] = None   # frame since which the gate is closed
         self.samples_in = 0
+        self.ended = False
 
     def _set_rate(self, rate) -> None:
         if isinstance(rate, bool) or not isinstance(rate, (int, np.integer)) and not (
@@ -273,6 +280,8 @@ class AudioFrontEnd:
 
     def add(self, samples, rate: Optional[int] = None) -> None:
         """Add samples (not processed yet: :meth:`step` processes them a block at a time)."""
+        if self.ended:
+            raise InputError("the audio has ended; a new stream needs a new front-end")
         self._set_rate(rate if rate is not None else self.rate if self.rate is not None else RATE)
         x = as_int16(samples).astype(np.float64)
         self.samples_in += len(x)
@@ -280,6 +289,39 @@ class AudioFrontEnd:
         if self.rate != RATE:
             y = np.clip(np.round(y), -32768, 32767)
         self._pending = np.concatenate([self._pending, y]) if len(self._pending) else y
+
+    @property
+    def duration(self) -> float:
+        """Seconds of audio fed (every sample, whether or not processed yet)."""
+        return self.samples_in / self.rate if self.rate else 0.0
+
+    def end(self) -> None:
+        """The stream has ended: the resampler's held-back samples are made (the input
+        continued by silence, as a whole-file resampler sees its end) and the last partial
+        block is completed with silence and processed, so that :attr:`time` covers every
+        sample fed; then the phone loop's utterance is ended (its phones final).
+
+        Examples
+        --------
+        >>> fe = AudioFrontEnd()
+        >>> _ = fe.feed(np.zeros(16000 + 100, np.int16), 16000)
+        >>> round(fe.time, 2), fe.end(), round(fe.time, 2)
+        (1.0, None, 1.02)
+        """
+        if self.ended:
+            return
+        self.ended = True
+        if self.rate is not None and self.rate != RATE:
+            want = int(math.ceil(self.samples_in * RATE / self.rate))      # 16 kHz samples the audio covers
+            have = self.blocks * BLOCK + len(self._pending)
+            tail = self._resampler.feed(np.zeros(self._resampler.half + 2))[:max(0, want - have)]
+            tail = np.clip(np.round(tail), -32768, 32767)
+            self._pending = np.concatenate([self._pending, tail])
+        if len(self._pending) % BLOCK:
+            self._pending = np.concatenate([self._pending, np.zeros(BLOCK - len(self._pending) % BLOCK)])
+        while self.step():
+            pass
+        self.rec.restart()
 
     def step(self) -> bool:
         """Process the next whole block, if one has come; True if it did."""
@@ -352,6 +394,44 @@ class AudioFrontEnd:
 
     def close(self) -> None:
         self.rec.close()
+
+
+def trim_memory() -> bool:
+    """Give the C heap's free pages back to the system (glibc's ``malloc_trim``); True if done.
+
+    A recogniser (:func:`_decoder`) allocates ~30 MB in many pieces on whichever thread made
+    it; freed, glibc keeps those pages in that thread's arena for reuse, so a server whose
+    audio sessions have all closed still held ~30 MB per session it ever had at once
+    (issue 38: 387 MB -> 2330 MB at 64 sessions, 2204 MB after all closed). Trimming after
+    a recogniser is freed returns them (measured in ``python -m lipsync.bench --only
+    serve_memory``). No-op (False) where the C library is not glibc.
+
+    Examples
+    --------
+    >>> trim_memory() in (True, False)
+    True
+    """
+    global _MALLOC_TRIM
+    if _MALLOC_TRIM is None:
+        _MALLOC_TRIM = False
+        try:
+            import ctypes
+            import ctypes.util
+
+            name = ctypes.util.find_library("c")
+            trim = getattr(ctypes.CDLL(name), "malloc_trim", None) if name else None
+            if trim is not None:
+                trim.argtypes, trim.restype = [ctypes.c_size_t], ctypes.c_int
+                _MALLOC_TRIM = trim
+        except OSError:  # pragma: no cover - no C library to load
+            pass
+    if _MALLOC_TRIM is False:
+        return False
+    _MALLOC_TRIM(0)
+    return True
+
+
+_MALLOC_TRIM = None
 
 
 def offline_phones(pcm: np.ndarray) -> List[Tuple[int, int, str]]:

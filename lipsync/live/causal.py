@@ -145,6 +145,7 @@ class CausalSequencer:
             self._tail = max(_LONG_S, MAX_TRANSITION_S / 2 + 1.0 / self.fps)
             self._relax_s = RELAX_S
         self._frozen: List[FrameSpec] = []   # frames 0 .. first - 1, final
+        self._frozen_shapes: List[str] = []  # ... and the shape each shows as a cue (:meth:`shape`)
         self._cut = 0.0                      # the window starts here (= first / fps)
         self._raw: Track = []                # pushed segments from the cut on
         self._horizon = 0.0                  # end of the pushed data
@@ -233,6 +234,53 @@ class CausalSequencer:
         finally:
             self._raw, self._horizon = raw, horizon
 
+    def cue(self, n: int) -> str:
+        """The mouth shape frame ``n`` shows as a cue, from the track so far: the viseme of
+        the planned segment (:func:`lipsync.motion.sequencer.plan_segments`, the track
+        ``lipsync cues`` writes offline) at the middle of the frame's interval, whatever the
+        timing curve or model blends between segments; rest past the data.
+
+        Examples
+        --------
+        >>> cs = CausalSequencer(fps=10, rest="X", timing="dominance")
+        >>> cs.extend([(0.0, 0.5, "X"), (0.5, 1.0, "D")])
+        >>> [cs.cue(n) for n in range(3, 8)]
+        ['X', 'X', 'D', 'D', 'D']
+        """
+        return self.cue_with(n, [])
+
+    def cue_with(self, n: int, tail: Track) -> str:
+        """:meth:`cue` as it would be if ``tail`` were pushed (as :meth:`spec_with`)."""
+        n = max(int(n), 0)
+        if self._window is None:
+            self.spec(self._first)       # moves the cut with what is pushed
+        if n < self._first:
+            return self._frozen_shapes[n]
+        tail = [(max(float(s), self._horizon), float(e), v) for s, e, v in tail if e > self._horizon]
+        raw, horizon = self._raw, self._horizon
+        try:
+            if tail:
+                self._raw, self._horizon = raw + tail, tail[-1][1]
+            return self._shapes(n, n + 1)[0]
+        finally:
+            self._raw, self._horizon = raw, horizon
+
+    def _shapes(self, first: int, stop: int) -> List[str]:
+        """Shapes of frames first .. stop - 1 of the window (rest where the track has ended)."""
+        if stop <= first:
+            return []
+        mids = [(n + 0.5) / self.fps for n in range(first, stop)]
+        if not self._raw or mids[0] >= self._horizon:
+            return [self.rest] * len(mids)
+        track = Timeline(tuple(Segment(s, e, v) for s, e, v in self._raw), kind=VISEME)
+        segs = plan_segments(track, rest=self.rest, closures=self.closures, duration=self._horizon, start=self._cut)
+        out, i = [], 0
+        for t in mids:
+            while i < len(segs) and segs[i][1] <= t:
+                i += 1
+            out.append(segs[i][2] if i < len(segs) else self.rest)
+        return out
+
     def is_final(self, n: int) -> bool:
         """True when frame ``n`` cannot change with later pushes (by the look-ahead rule)."""
         return n < self._first or n / self.fps <= self.final_until
@@ -283,6 +331,7 @@ class CausalSequencer:
             return
         # The window's frames before the cut are final (they depend on nothing after G).
         window = self._plan(self._horizon, self._first, frame_count(self._horizon, self.fps))
+        self._frozen_shapes.extend(self._shapes(self._first, first))
         self._frozen.extend(window[:first - self._first])
         cut = first / self.fps
         self._raw = [(max(s, cut), e, v) for s, e, v in self._raw if e > cut]

@@ -67,6 +67,9 @@ class Animator:
         banks made from video). By default frame i of such a bank is plate frame
         :meth:`lipsync.composite.plate.Plate.index` with the morphed lower face on it
         (:mod:`lipsync.composite.plate`): the speaker's own blinks and head motion.
+    plate_start : float, optional
+        Seconds into the idle plate where the clip starts (``--plate-start``); default: a
+        place derived from the timeline (:func:`lipsync.composite.plate_time.default_start`).
     samples : {None, "on", "off"} or bool
         Whether a bank with mouth samples (bank.yaml ``samples:``, banks made from video)
         shows a real sample per frame on its plate (:mod:`lipsync.pipeline.samplepath`);
@@ -87,7 +90,7 @@ class Animator:
     def __init__(self, bank: Union[Bank, str, "os.PathLike[str]"], timeline, fps: float = DEFAULT_FPS, *,
                  map: Union[str, "os.PathLike[str]", PhonemeMap, None] = None, method: str = "flow",
                  timing=None, store: Optional[FlowStore] = None, timeline_options=None, still: bool = False,
-                 samples=None):
+                 plate_start: Optional[float] = None, samples=None):
         self.bank = bank if isinstance(bank, Bank) else Bank.load(bank)
         self.fps = check_fps(fps)
         if not isinstance(timeline, Timeline):
@@ -104,7 +107,7 @@ class Animator:
         self.specs: List[FrameSpec] = sequence(self.visemes, fps=self.fps, rest=self.bank.rest, timing=self.timing,
                                                closures=pmap.closures, classes=viseme_classes(pmap, self.bank.rest))
         self.renderer = Renderer(self.bank, method=method, store=store)
-        self._attach_plate(still)
+        self._attach_plate(still, plate_start)
         self._attach_samples(samples, timeline, pmap, store)
 
     def _attach_samples(self, option, timeline, pmap, store) -> None:
@@ -120,14 +123,27 @@ class Animator:
             self.sample_path = SamplePath(samples, self.specs, timeline, self.fps, pmap, self.bank.rest,
                                           store=store or FlowStore.for_bank(self.bank), timing=self.timing)
 
-    def _attach_plate(self, still: bool) -> None:
-        """The bank's idle plate to composite onto, unless ``still`` (or the bank has none)."""
+    def _attach_plate(self, still: bool, plate_start: Optional[float] = None) -> None:
+        """The bank's idle plate to composite onto, unless ``still`` (or the bank has none),
+        and this clip's way through it (:mod:`lipsync.composite.plate_time`): from
+        ``plate_start`` seconds, by default a place derived from the frames' mouth shapes (the
+        same clip the same frames; another sentence another place)."""
         self.plate = None
+        self.plate_line = None
         if not still and self.bank.plate is not None and self.bank.channels == 3:
             from ..composite.plate import load_plate
+            from ..composite.plate_time import default_start
 
             self.plate = load_plate(self.bank)
             self._mouth = threading.local()  # each render thread its own morphed frame
+            if self.plate is None:  # switched off in bank.yaml
+                return
+            if plate_start is None:  # the frames' own content (an Animator's or a LiveClip's specs)
+                key = [(s.from_viseme, s.to_viseme, round(float(s.alpha), 4)) for s in self.specs]
+                plate_start = default_start(key) * len(self.plate) / self.plate.fps
+            #: Where on the plate this clip starts, seconds (``--plate-start``).
+            self.plate_start = float(plate_start)
+            self.plate_line = self.plate.timeline(self.plate_start)
 
     @classmethod
     def from_audio(cls, bank: Union[Bank, str, "os.PathLike[str]"], audio, text: Optional[str] = None,
@@ -197,13 +213,13 @@ class Animator:
         if mouth is None:
             mouth = self._mouth.frame = np.empty_like(out)
         if self.sample_path is not None:
-            j = self.plate.index(index, self.fps)
+            j = self.plate.index(index, self.fps, self.plate_line)
             np.copyto(out, self.plate.frames[j])
             pose = self.plate.poses[j]
             return self.sample_path.render_onto(index, out, pose, self.sample_path.prepared(j, pose, out.shape))
         # only the lower face's box of the morph is read: only that box is rendered
         self.renderer.render(spec.from_viseme, spec.to_viseme, spec.alpha, out=mouth, region=self.plate.region)
-        return self.plate.render_into(index, self.fps, mouth, out)
+        return self.plate.render_into(index, self.fps, mouth, out, self.plate_line)
 
     def same_as_previous(self, index: int) -> bool:
         """Whether frame ``index`` is identical to frame ``index - 1`` (a held shape).

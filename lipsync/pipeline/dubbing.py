@@ -8,22 +8,25 @@ stay; its lower face is replaced by the speaker's bank morphed to the new speech
     bank (--bank, else made from VIDEO by lipsync init --video and cached)
         --face mesh of its pictures--> lower-face mask (union over the visemes), still points
     SPEECH (+ --text) --aligner--> phones --Animator (map, timing)--> one FrameSpec per frame
-    frame i: plate = VIDEO frame pingpong(i) (forwards, then backwards when the speech is
-        longer; cut when shorter) --PlateCompositor (morphed lower face, ROI only)-->
+    frame i: plate = VIDEO frame from --plate-start on (default its start), played straight;
+        when the speech is longer, on along a plate timeline that joins the video to itself
+        where its frames match, never mid-blink (lipsync.composite.plate_time); cut when
+        shorter --PlateCompositor (morphed lower face, ROI only)-->
         --> encoder (H.264 + the new speech as AAC) --> OUT (renamed into place)
 
 Frames where the tracker lost the face are written as they are, with one warning naming
 them (frame numbers and times). Caches live under the user's cache folder
 (``$XDG_CACHE_HOME/lipsync/dub``), one entry per video content (sha256 of its bytes): the
-face track and, per phoneme map, the bank made from it. An entry that does not load is a
-miss: removed and made again.
+face track and, per phoneme map, transcript and language of the video, the bank made from it;
+their rules (checked entries, no links followed, killed runs' leftovers removed, an unwritable
+cache) and the temporary store of frames are :mod:`lipsync.pipeline.cache`'s.
 """
 
 from __future__ import annotations
 
+import errno
 import hashlib
 import os
-import shutil
 import threading
 import time
 import warnings
@@ -34,16 +37,15 @@ from typing import List, Optional, Tuple
 import numpy as np
 
 from ..errors import InputError, PathLike
-from ..composite.plate import PlateCompositor, colour_lut, pingpong, plate_colour
+from ..composite.plate import PlateCompositor, colour_lut, plate_colour
+from .cache import cache_root
 
 __all__ = ["dub", "DubReport", "DubWarning", "cache_root", "lost_frames_text"]
 
 #: Cache format: bump when what an entry holds changes (older entries are then misses).
-CACHE_VERSION = 1
-#: Decoded plate frames kept for playing the video backwards (speech longer than the
-#: video) are held in a temporary file beside the output (``.OUT.partial-PID.plate-frames``)
-#: rather than in memory: a 30 s 720p video is 2 GB of RGB.
-_MEMMAP_SUFFIX = ".plate-frames"
+#: 3: the video turned upright before tracking; the bank's key has the video's language; the
+#: frames of a variable-frame-rate video are those shown at a constant rate.
+CACHE_VERSION = 3
 
 
 #: Output formats with a sound track (lipsync.encode): H.264 + AAC, VP9 + Opus, ProRes + PCM.
@@ -93,13 +95,6 @@ class DubReport:
                 f"{w}x{h}, over {self.video_frames} video frames; {total:.1f} s ({steps})")
 
 
-def cache_root() -> Path:
-    """Where dub caches live: ``$XDG_CACHE_HOME/lipsync/dub`` (``~/.cache/lipsync/dub``),
-    beside the flow stores of read-only banks (:meth:`lipsync.morphing.store.FlowStore.for_bank`)."""
-    base = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "lipsync"
-    return base / "dub"
-
-
 def _digest(path: Path) -> str:
     h = hashlib.sha256(f"lipsync-dub-{CACHE_VERSION}".encode())
     with open(path, "rb") as f:
@@ -130,39 +125,19 @@ def lost_frames_text(lost, fps: float, limit: int = 8) -> str:
 
 # --------------------------------------------------------------------------- caches
 
-def _load_track(path: Path):
-    from ..face.track import FaceTrack
-
-    with np.load(path, allow_pickle=False) as z:
-        points, found = z["points"], z["found"]
-        fps, size = float(z["fps"]), tuple(int(v) for v in z["size"])
-    if points.ndim != 3 or points.shape[1:] != (468, 3) or found.shape != (len(points),):
-        raise ValueError("bad track arrays")
-    return FaceTrack(points=points, raw=points, found=found.astype(bool), fps=fps, size=size, source=str(path))
-
-
-def _save_track(path: Path, track) -> None:
-    from .._files import atomic_write_bytes
-
-    def write(f):
-        np.savez(f, points=track.points, found=track.found, fps=np.float64(track.fps),
-                 size=np.array(track.size, np.int64))
-
-    atomic_write_bytes(path, write)
-
-
 def video_track(video: Path, info, *, entry: Optional[Path], quiet: bool, mesh=None):
     """The face track of every frame of ``video`` (from the cache entry when it loads)."""
     from ..face.track import track_frames
     from ..face.video import read_video
     from tqdm import tqdm
 
+    from .cache import load_track, save_track
+
     cached = entry / "track.npz" if entry is not None else None
-    if cached is not None and cached.is_file():
-        try:
-            return _load_track(cached)
-        except Exception:  # a damaged entry is a miss
-            cached.unlink(missing_ok=True)
+    if cached is not None:
+        track = load_track(cached, info)  # None: a miss (a damaged entry is removed)
+        if track is not None:
+            return track
     with tqdm(total=info.frame_count or None, desc="face", unit="frame", disable=quiet, leave=False) as bar:
         with warnings.catch_warnings():
             # the lost frames are named once, by dub, in output frames
@@ -172,45 +147,66 @@ def video_track(video: Path, info, *, entry: Optional[Path], quiet: bool, mesh=N
             track = track_frames(read_video(video, info=info), fps=info.fps, size=info.size, source=str(video),
                                  mesh=mesh, progress=bar.update)
     if cached is not None:
-        try:
-            cached.parent.mkdir(parents=True, exist_ok=True)
-            _save_track(cached, track)
-        except OSError:
-            pass  # a cache that cannot be written costs time, not the result
+        save_track(cached, track)  # a cache that cannot be written costs time, not the result
     return track
+
+
+def bank_key(map=None, text: Optional[str] = None, lang: Optional[str] = None) -> str:
+    """The cache name of a bank made from a video: its phoneme map, transcript and the
+    language of its speech (English and no language given are one, as are the default map
+    and none given).
+
+    Examples
+    --------
+    >>> bank_key(lang="es") == bank_key(lang="es"), bank_key(lang="es") == bank_key(), bank_key(lang="en") == bank_key()
+    (True, False, True)
+    """
+    from ..phonetics.g2p import is_english
+    from ..phonetics.phonemes import DEFAULT_MAP
+
+    lang = None if lang is None or is_english(lang) else lang
+    map = DEFAULT_MAP if map is None else map  # the command line's default and the API's are one map
+    return hashlib.sha256(repr((os.fspath(map) if map is not None else None, text, lang)).encode()).hexdigest()[:12]
+
+
+def _align_speech(audio: Path, text: Optional[str], lang: Optional[str]):
+    """The new speech's words and phones (:func:`lipsync.speech.align.align`, as
+    :meth:`lipsync.Animator.from_audio` aligns them)."""
+    from ..speech.align import MissingWordsWarning, align
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", MissingWordsWarning)  # words spelt out: the alignment says so
+        return align(audio, text, lang=lang)
 
 
 def bank_from_video(video: Path, *, entry: Path, map=None, text: Optional[str] = None, jobs=None,
                     quiet: bool = True, track=None, lang: Optional[str] = None):
-    """The bank ``lipsync init OUT --video VIDEO [--text TEXT]`` makes, cached in ``entry``
-    (one per map and transcript)."""
+    """The bank ``lipsync init OUT --video VIDEO [--text TEXT] [--lang LANG]`` makes, cached
+    in ``entry`` (one per map, transcript and language of the video's speech)."""
     from ..banks.bank import Bank
     from ..videobank import make_bank
 
-    key = hashlib.sha256(repr((os.fspath(map) if map is not None else None, text, lang)).encode()).hexdigest()[:12]
-    folder = entry / f"bank-{key}"
-    if (folder / "bank.yaml").is_file():
-        try:
-            return Bank.load(folder)
-        except Exception:  # a broken entry is a miss
-            shutil.rmtree(folder, ignore_errors=True)
-    folder.parent.mkdir(parents=True, exist_ok=True)
+    from .cache import load_bank
+
+    folder = entry / f"bank-{bank_key(map, text, lang)}"
+    cached = load_bank(folder)  # None: a miss (a broken entry, or a link, is removed)
+    if cached is not None:
+        return cached
     options = {"map": os.fspath(map)} if map is not None else {}
     if lang is not None:
         options["lang"] = lang
-    # Made under this process's own name, then renamed into place: two dubs of one video at
-    # once (a batch) must not replace a bank the other is reading. The first rename wins; a
-    # partial of a killed process is removed by the next dub (the render partials' rule).
-    from .._files import partial_name, remove_stale_partials
-
-    remove_stale_partials(folder)
-    mine = folder.parent / partial_name(folder)
-    make_bank(mine, [video], text=text, force=True, quiet=quiet, jobs=jobs,
-              tracks={video: track} if track is not None else None, **options)
+    # Made in place by make_bank, which writes into a hidden staging folder beside it
+    # (.bank-KEY.partial-PID-XXXX, removed by the next run if this one is killed) and renames
+    # it into place: two dubs of one video at once must not replace a bank the other is
+    # reading, so no --force: the first rename wins and the other keeps that bank.
     try:
-        os.rename(mine, folder)
-    except OSError:  # another process's bank got there first: the same bank, keep that one
-        shutil.rmtree(mine, ignore_errors=True)
+        make_bank(folder, [video], text=text, quiet=quiet, jobs=jobs,
+                  tracks={video: track} if track is not None else None, **options)
+    except InputError:
+        cached = load_bank(folder)
+        if cached is None:
+            raise
+        return cached
     return Bank.load(folder)
 
 
@@ -268,49 +264,32 @@ def colour_table(bank, video: Path, track, poses: np.ndarray, bank_mesh: np.ndar
 # --------------------------------------------------------------------------- plate frames
 
 class _PlateReader:
-    """The video's frames by index for render threads: decoded once, in order; kept in a
-    temporary file only when the speech outlasts the video (played backwards)."""
+    """The video's frames by index for render threads: decoded once, in order; when the
+    speech outlasts the video (the video joined to itself), all ``count`` of them are kept in a
+    :class:`~lipsync.pipeline.cache.FrameStore` (the temporary folder; its room checked
+    here, before any work is done on it)."""
 
-    def __init__(self, video: Path, info, *, keep: bool, output: Path):
+    def __init__(self, video: Path, info, *, keep: bool, count: int):
         from ..face.video import read_video
+        from .cache import FrameStore
 
+        self._store = FrameStore(count, (info.size[1], info.size[0], 3), what=f"the {count} frames of {video.name} "
+                                 f"joined to itself") if keep else None
         self._gen = read_video(video, info=info)
         self._lock = threading.Lock()
         self._next = 0
         self._recent = {}
-        self._shape = (info.size[1], info.size[0], 3)
-        self._store = None
-        self._path = None
-        self._keep = keep
-        self._output = output
-
-    def _grow_store(self, n: int):
-        if self._store is None:
-            from .._files import partial_name
-
-            # beside the output, named as its partials are: a killed run's is removed by the
-            # next write of the output (lipsync._files.remove_stale_partials)
-            self._path = self._output.parent / partial_name(self._output, _MEMMAP_SUFFIX)
-            self._path.touch()
-            self._cap = 0
-        if n > self._cap:
-            cap = max(n, 2 * self._cap, 64)
-            with open(self._path, "r+b") as f:
-                f.truncate(cap * int(np.prod(self._shape)))
-            self._store = np.memmap(self._path, np.uint8, "r+", shape=(cap,) + self._shape)
-            self._cap = cap
 
     def get(self, j: int) -> np.ndarray:
         with self._lock:
             if j < self._next:
                 if j in self._recent:
                     return self._recent.pop(j)
-                return self._store[j]
+                return self._store.get(j)
             while self._next <= j:
                 frame = next(self._gen)
-                if self._keep:
-                    self._grow_store(self._next + 1)
-                    self._store[self._next] = frame
+                if self._store is not None:
+                    self._store.put(self._next, frame)
                 self._recent[self._next] = frame
                 self._next += 1
             # frames asked for once, in order (render threads run a few frames apart)
@@ -320,9 +299,51 @@ class _PlateReader:
 
     def close(self):
         self._gen.close()
-        self._store = None
-        if self._path is not None:
-            self._path.unlink(missing_ok=True)
+        if self._store is not None:
+            self._store.close()
+
+
+def _refuse_silence(samples: np.ndarray, audio: Path) -> None:
+    """A digitally silent speech file (its loudest 10 ms below the aligner's silence) has
+    nothing to dub: exit 2 rather than a still mouth."""
+    from ..speech.align import SILENCE_DBFS
+
+    n = len(samples) // 160
+    x = samples[:max(n, 1) * 160].astype(np.float32) / 32768.0
+    if x.size < 160:
+        x = np.pad(x, (0, 160 - x.size))
+    loudest = float(20 * np.log10(np.sqrt((x.reshape(-1, 160) ** 2).mean(axis=1)).max() + 1e-12))
+    if loudest < SILENCE_DBFS:
+        raise InputError(f"is silent (loudest {loudest:.0f} dBFS; speech is above {SILENCE_DBFS:g}): there is no "
+                         f"speech to dub with", path=audio)
+
+
+def video_frames_for(track, n: int, start: float = 0.0) -> np.ndarray:
+    """The video frame shown at each of ``n`` output frames: from ``start`` seconds on,
+    straight to (nearly) its end; then along a plate timeline
+    (:class:`lipsync.composite.plate_time.PlateTimeline`) that joins it to itself where the
+    face above the nose matches (face-mesh points, :func:`~lipsync.composite.plate_time.upper_face_features`)
+    and never inside a blink (eye opening of the face mesh).
+
+    Examples
+    --------
+    >>> from types import SimpleNamespace
+    >>> t = SimpleNamespace(points=np.zeros((10, 468, 3)), found=np.ones(10, bool), fps=25.0)
+    >>> video_frames_for(t, 4, start=0.2).tolist()
+    [5, 6, 7, 8]
+    """
+    from ..composite.plate_time import PlateTimeline, PlateTimes, upper_face_features
+    from ..face.measure import eye_opening
+
+    nv = len(track.points)
+    first = int(round(start * track.fps)) % max(nv, 1)
+    if first + n <= nv:
+        return np.arange(first, first + n)
+    eyes = eye_opening(track.points)
+    eyes[~np.asarray(track.found, bool)] = np.nan
+    times = PlateTimes(upper_face_features(track.points, track.found), eyes, track.fps)
+    # the video played through first (joins only from its last MIN_RUN_S)
+    return PlateTimeline(times, start=first / nv, straight=nv - first - times.min_run).frames(n)
 
 
 # --------------------------------------------------------------------------- the pipeline
@@ -330,7 +351,8 @@ class _PlateReader:
 def dub(video: PathLike, audio: PathLike, output: PathLike, *, text: Optional[str] = None, bank=None,
         video_text: Optional[str] = None, map=None, timing=None, crf: int = 18, preset: Optional[str] = None,
         store=None, jobs: Optional[int] = None, quiet: bool = False, cache: Optional[PathLike] = None,
-        lang: Optional[str] = None, samples=None) -> DubReport:
+        lang: Optional[str] = None, video_lang: Optional[str] = None,
+        plate_start: Optional[float] = None, samples=None) -> DubReport:
     """Re-voice ``video`` with the speech in ``audio`` (``lipsync dub``).
 
     Parameters
@@ -362,8 +384,14 @@ def dub(video: PathLike, audio: PathLike, output: PathLike, *, text: Optional[st
     cache : path-like, optional
         Cache folder (default :func:`cache_root`).
     lang : str, optional
-        The language of the new speech and of VIDEO's (BCP 47; default English), as ``--lang``
+        The language of the new speech (BCP 47; default English), as ``--lang``
         (:func:`lipsync.speech.align.align`).
+    video_lang : str, optional
+        The language of what is said in ``video`` (default English), used only to make its
+        bank; when its words cannot be recognised there the bank is made from the phones
+        heard, or from the lips alone (:func:`lipsync.videobank.speech.transcribe`).
+    plate_start : float, optional
+        Seconds into ``video`` where the output starts (default 0: the video as it is).
     samples : {None, "on", "off"} or bool
         A bank with mouth samples shows a selected real sample per frame
         (:mod:`lipsync.pipeline.samplepath`); ``"off"``: one picture per viseme morphed.
@@ -375,8 +403,14 @@ def dub(video: PathLike, audio: PathLike, output: PathLike, *, text: Optional[st
     Raises
     ------
     lipsync.errors.InputError
-        ``video`` is missing or not a video, or shows no face; ``audio`` is missing or has
-        no sound (the message names the file).
+        ``video`` is missing or not a video, or shows no face, or a face no way up;
+        ``audio`` is missing, has no sound or is silent (the message names the file).
+
+    Warns
+    -----
+    lipsync.speech.align.TranscriptMismatchWarning
+        ``text`` does not fit the new speech at all (``lipsync dub`` stops on it with exit
+        2 unless ``--allow-mismatch``, as ``lipsync render`` does).
 
     Examples
     --------
@@ -421,22 +455,38 @@ def dub(video: PathLike, audio: PathLike, output: PathLike, *, text: Optional[st
         raise InputError(f"a dub is a video with sound: write {', '.join('.' + f for f in SOUND_FORMATS)} "
                          f"(got {out_format})", path=output)
     info = probe_video(video)
+    if info.variable is not None:  # read at a constant rate (lipsync.face.video.constant_rate)
+        warnings.warn(f"{video}: variable frame rate ({info.variable[0]:.3g} to {info.variable[1]:.3g} fps): dubbed "
+                      f"at a constant {info.fps:g} fps, each frame the one the video shows at that time",
+                      DubWarning, stacklevel=2)
     samples = load_audio(audio)  # AudioError (an InputError) naming a file without sound
     if samples.size == 0:
         raise InputError("has no sound to dub with (0 samples)", path=audio)
-    entry = Path(os.fspath(cache)) if cache is not None else cache_root()
-    entry = entry / _digest(video)
+    _refuse_silence(samples, audio)
+    if plate_start is not None and not (np.isfinite(plate_start) and plate_start >= 0):
+        raise InputError(f"--plate-start must be a number of seconds, 0 or more (got {plate_start})")
+    from .cache import open_entry
+
+    cache_entry = open_entry(_digest(video), cache)  # a temporary one is removed when dub ends
+    entry = cache_entry.path
     seconds["probe"] = time.perf_counter() - t
 
     t = time.perf_counter()
+    alignment = _align_speech(audio, text, lang)  # first: a transcript that does not fit stops before the long work
+    seconds["align"] = time.perf_counter() - t
+
+    t = time.perf_counter()
     mesh = FaceMesh()
+    from ..videobank.sources import find_upright
+
+    info = find_upright(video, info, mesh)  # as init --video does: a sideways face turned, or refused
     track = video_track(video, info, entry=entry, quiet=quiet, mesh=mesh)
     seconds["track"] = time.perf_counter() - t
 
     t = time.perf_counter()
     if bank is None:
         bank = bank_from_video(video, entry=entry, map=map, text=video_text, jobs=jobs, quiet=quiet, track=track,
-                               lang=lang)
+                               lang=video_lang)
     elif not isinstance(bank, Bank):
         bank = Bank.load(bank)
     seconds["bank"] = time.perf_counter() - t
@@ -450,8 +500,8 @@ def dub(video: PathLike, audio: PathLike, output: PathLike, *, text: Optional[st
     t = time.perf_counter()
     if not isinstance(store, FlowStore):
         store = FlowStore.for_bank(bank, store)
-    anim = Animator.from_audio(bank, audio, text, fps=info.fps, lang=lang, map=map, timing=timing, store=store,
-                               still=True)
+    anim = Animator(bank, alignment.phones, fps=info.fps, map=map, timing=timing, store=store, still=True)
+    anim.alignment = alignment
     n = len(anim)
     if n == 0:
         raise InputError("the speech lasts 0 s: there is no frame to write", path=audio)
@@ -461,11 +511,11 @@ def dub(video: PathLike, audio: PathLike, output: PathLike, *, text: Optional[st
     if any(not store.pair_path(store.pair_key(bank, a, b, nb.axis)).exists() for a, b in all_pairs(bank.names)):
         preprocess(bank, store=store, jobs=jobs, quiet=quiet, normalised=nb)
     sample_path = _sample_path(bank, anim, sample_option, compositor, store)
-    seconds["align"] = time.perf_counter() - t
+    seconds["align"] += time.perf_counter() - t
 
     t = time.perf_counter()
     nv = len(track)
-    plate_of = [pingpong(i, nv) for i in range(n)]
+    plate_of = video_frames_for(track, n, plate_start or 0.0)
     lost = tuple(i for i in range(n) if not track.found[plate_of[i]])
     if lost:
         warnings.warn(f"{video}: no face in the video at output frame(s) {lost_frames_text(lost, info.fps)}; "
@@ -474,7 +524,8 @@ def dub(video: PathLike, audio: PathLike, output: PathLike, *, text: Optional[st
     bank_shape = anim.renderer.shape + (anim.renderer.channels,)
     scratch = threading.local()
     output.parent.mkdir(parents=True, exist_ok=True)
-    reader = _PlateReader(video, info, keep=n > nv, output=output)
+    straight = bool(np.all(np.diff(plate_of) == 1)) if n > 1 else True
+    reader = _PlateReader(video, info, keep=not straight, count=nv)
     shape = (info.size[1], info.size[0], 3)
     geometry = [compositor.geometry(p, shape) if found else None for p, found in zip(poses, track.found)]
     sample_geometry = geometry if sample_path is None else [
@@ -503,6 +554,10 @@ def dub(video: PathLike, audio: PathLike, output: PathLike, *, text: Optional[st
             with tqdm(total=n, desc="dub", unit="frame", disable=quiet, leave=False) as bar:
                 render_parallel(render_into, n, (h, w, 3), writer.write_prepared, progress=lambda d: bar.update(1),
                                 prepare=writer.prepare)
+    except OSError as exc:
+        if exc.errno in (errno.ENOSPC, errno.EDQUOT):  # the encoder has removed its partial output
+            raise InputError("cannot write: disk full (nothing was written)", path=output) from None
+        raise
     finally:
         reader.close()
     seconds["render"] = time.perf_counter() - t

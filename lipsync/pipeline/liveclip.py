@@ -46,6 +46,39 @@ def _samples(audio) -> np.ndarray:
     return load_audio(audio)
 
 
+def live_session(audio, bank, *, fps: float = DEFAULT_FPS, lookahead: Optional[float] = None, map=None,
+                 timing=None, quiet: bool = True):
+    """A :class:`~lipsync.live.animator.LiveAnimator` fed ``audio`` in real-time 20 ms chunks
+    and ended (:meth:`~lipsync.live.animator.LiveAnimator.finish_audio`): every frame of the
+    recording fixed, ``(animator, frame count)`` with the count ``ceil(duration * fps)``.
+
+    Parameters are those of :func:`live_specs`.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from lipsync._data import default_bank_dir
+    >>> live, n = live_session(np.zeros(8000, np.int16), default_bank_dir())
+    >>> n, live.spec(n - 1).shown, live.cue(n - 1)
+    (13, 'X', 'X')
+    """
+    from tqdm import tqdm
+
+    from ..live.animator import LiveAnimator
+
+    pcm = _samples(audio)
+    live = LiveAnimator(bank, fps=fps, map=map, timing=timing, prepare=False, audio_lookahead=lookahead)
+    fixed = 0
+    with tqdm(total=len(pcm), desc="live", unit="sample", unit_scale=True, disable=quiet, leave=False) as bar:
+        for i in range(0, len(pcm), BLOCK):
+            fixed += len(live.feed_audio(pcm[i:i + BLOCK], RATE))
+            bar.update(min(BLOCK, len(pcm) - i))
+    fixed += len(live.finish_audio())
+    # every frame came from feed_audio or finish_audio, as a streaming session delivers them
+    # (with no look-ahead a frame is due as its interval starts: one past the end may come)
+    return live, min(fixed, frame_count(len(pcm) / RATE, live.fps))
+
+
 def live_specs(audio, bank, *, fps: float = DEFAULT_FPS, lookahead: Optional[float] = None, map=None,
                timing=None, quiet: bool = True) -> List[FrameSpec]:
     """The FrameSpecs a live session fed ``audio`` in real-time 20 ms chunks shows.
@@ -67,34 +100,46 @@ def live_specs(audio, bank, *, fps: float = DEFAULT_FPS, lookahead: Optional[flo
     Returns
     -------
     list of FrameSpec
-        One per frame of the recording (``ceil(duration * fps)``).
+        One per frame of the recording (``ceil(duration * fps)``: the frames
+        :meth:`~lipsync.live.animator.LiveAnimator.feed_audio` made due and those
+        :meth:`~lipsync.live.animator.LiveAnimator.finish_audio` delivered at the end).
     """
-    from tqdm import tqdm
-
-    from ..live.animator import LiveAnimator
-
-    pcm = _samples(audio)
-    live = LiveAnimator(bank, fps=fps, map=map, timing=timing, prepare=False, audio_lookahead=lookahead)
-    with tqdm(total=len(pcm), desc="live", unit="sample", unit_scale=True, disable=quiet, leave=False) as bar:
-        for i in range(0, len(pcm), BLOCK):
-            live.feed_audio(pcm[i:i + BLOCK], RATE)
-            bar.update(min(BLOCK, len(pcm) - i))
-    live.finish_audio()
-    return [live.spec(n) for n in range(frame_count(len(pcm) / RATE, live.fps))]
+    live, n = live_session(audio, bank, fps=fps, lookahead=lookahead, map=map, timing=timing, quiet=quiet)
+    return [live.spec(k) for k in range(n)]
 
 
-def live_cues(specs: List[FrameSpec], fps: float) -> List[Tuple[float, float, str]]:
-    """Mouth cues of live frames: each frame's nearer viseme (``from`` below alpha 0.5),
-    runs merged, frame n covering ``[n / fps, (n + 1) / fps)``.
+def live_shapes(audio, bank, *, fps: float = DEFAULT_FPS, lookahead: Optional[float] = None, map=None,
+                timing=None, quiet: bool = True) -> List[str]:
+    """The mouth shape (cue) of each frame a live session fed ``audio`` shows
+    (:meth:`~lipsync.live.animator.LiveAnimator.cue`): what ``lipsync cues AUDIO --live``
+    writes. Parameters as :func:`live_specs`.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from lipsync._data import default_bank_dir
+    >>> set(live_shapes(np.zeros(8000, np.int16), default_bank_dir()))
+    {'X'}
+    """
+    live, n = live_session(audio, bank, fps=fps, lookahead=lookahead, map=map, timing=timing, quiet=quiet)
+    return [live.cue(k) for k in range(n)]
+
+
+def live_cues(frames, fps: float) -> List[Tuple[float, float, str]]:
+    """Mouth cues of live frames, runs merged, frame n covering ``[n / fps, (n + 1) / fps)``:
+    each frame's shape (:func:`live_shapes`, a viseme name) or, for a FrameSpec, its nearer
+    viseme (``from`` below alpha 0.5).
 
     Examples
     --------
     >>> live_cues([FrameSpec("X", "X", 0.0), FrameSpec("X", "D", 0.7), FrameSpec("D", "D", 0.0)], 10)
     [(0.0, 0.1, 'X'), (0.1, 0.3, 'D')]
+    >>> live_cues(["X", "B", "B"], 10)
+    [(0.0, 0.1, 'X'), (0.1, 0.3, 'B')]
     """
     cues: List[Tuple[float, float, str]] = []
-    for n, s in enumerate(specs):
-        v = s.from_viseme if s.alpha < 0.5 else s.to_viseme
+    for n, s in enumerate(frames):
+        v = s if isinstance(s, str) else s.from_viseme if s.alpha < 0.5 else s.to_viseme
         if cues and cues[-1][2] == v:
             cues[-1] = (cues[-1][0], round((n + 1) / fps, 6), v)
         else:
@@ -107,9 +152,12 @@ class LiveClip(Animator):
     (:func:`live_specs`): what ``render_clip(..., live=...)`` renders."""
 
     def __init__(self, bank, audio, fps: float = DEFAULT_FPS, *, lookahead: Optional[float] = None, map=None,
-                 method: str = "flow", timing=None, store=None, quiet: bool = True, still: bool = False):
+                 method: str = "flow", timing=None, store=None, quiet: bool = True, still: bool = False,
+                 plate_start: float = 0.0):
         self.bank = bank if isinstance(bank, Bank) else Bank.load(bank)
         self.specs = live_specs(audio, self.bank, fps=fps, lookahead=lookahead, map=map, timing=timing, quiet=quiet)
         self.fps = float(fps)
         self.renderer = Renderer(self.bank, method=method, store=store)
-        self._attach_plate(still)
+        # the plate timeline a live session started at plate_start follows (default 0,
+        # LiveAnimator's): render --live shows what the session shows
+        self._attach_plate(still, plate_start=plate_start)

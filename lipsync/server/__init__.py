@@ -137,6 +137,11 @@ class LiveServer:
         if self.pool.method in ("flow", "splat"):
             # every flow now, so that no live frame waits seconds for a missing one
             preprocess(self.bank, store=self.store, quiet=config.quiet, normalised=self.pool.nb)
+        from ..live.pool import shared_plate
+
+        # the idle plate of a bank made from video, decoded once: every session composites
+        # onto it (held here, so sessions coming and going do not decode it again)
+        self.plate = shared_plate(self.bank)
         self.executor = ThreadPoolExecutor(max_workers=workers, thread_name_prefix="lipsync-live")
         self.tmp = Path(tempfile.mkdtemp(prefix="lipsync-serve-"))
         self.jobs = Jobs(self.tmp, bank=self.bank, store=self.store, fps=config.fps, map=config.map,

@@ -5,8 +5,11 @@ Client -> server, text frames holding one JSON object each:
 * ``{"type": "config", "fps": 25, "format": "jpeg"|"webp", "quality": 80}`` (optional,
   before anything else is pushed); for audio also ``"audio_rate": 48000`` (Hz, before the
   first audio), ``"lookahead": 200`` (ms, the audio look-ahead, before the first audio) and
-  ``"specs": true`` (a ``{"type": "spec", "n", "from", "to", "alpha"}`` text message before
-  each frame: what it shows, for checking);
+  ``"specs": true`` (a ``{"type": "spec", "n", "from", "to", "alpha", "cue"}`` text message
+  before each frame: what it shows, for checking, and its mouth shape as a cue,
+  :meth:`lipsync.LiveAnimator.cue`); ``"plate_start": 1.5`` (seconds into a real subject's
+  idle plate where the session starts, before anything is pushed; by default each session
+  starts at a place of its own, so two heads on one page do not blink in unison);
 * binary frames: audio, 16-bit little-endian PCM mono at ``audio_rate`` (at most
   :data:`MAX_AUDIO_MESSAGE_S` per message, in real time: at most
   :data:`MAX_AUDIO_AHEAD_S` ahead of the wall clock since the first). Audio is the session's
@@ -19,10 +22,18 @@ Client -> server, text frames holding one JSON object each:
 * ``{"type": "clock", "t": 1.25}`` -- the client's playback time now; the server
   extrapolates it in real time until the next clock message;
 * ``{"type": "stop"}`` -- playback paused: no frames until the next clock message;
+* ``{"type": "end"}`` -- an audio session's stream has ended (no other field): its last
+  phones are decided and every frame still to come is sent, in order, up to the end of the
+  audio (the last look-ahead's frames, which no later audio would make due), then
+  ``{"type": "end", "frames": N}`` (N: the stream's frame count, ``ceil(seconds * fps)``,
+  as an offline render of the same audio has). Audio after it is refused; events may still
+  be pushed. An ``end`` with fields, before any audio, or a second one is answered with an
+  error (the session carries on);
 * ``{"type": "ping"}`` -- answered with ``{"type": "pong"}``.
 
 Server -> client: text ``{"type": "ready", ...}`` once, ``{"type": "error", "error": ...}``
-for a message it could not use (the session carries on), and binary frames: a 16-byte
+for a message it could not use (the session carries on), ``{"type": "end", ...}`` after the
+last frame of an ended audio stream, and binary frames: a 16-byte
 header (``<IId``: frame number, flags -- bit 0 set when the frame is final --, its time in
 seconds) followed by the JPEG or WebP image.
 
@@ -32,6 +43,8 @@ Examples
 Clock(t=1.5)
 >>> parse('{"type": "push", "start": 0, "end": 0.2, "label": "M"}')
 Push(events=((0.0, 0.2, 'M', None),))
+>>> parse('{"type": "end"}')
+End()
 >>> parse('{"type": "push", "start": 0}')
 Traceback (most recent call last):
 ...
@@ -68,6 +81,9 @@ MAX_AUDIO_MESSAGE_S = 1.0
 MAX_AUDIO_AHEAD_S = 2.0
 #: The audio look-ahead a session may ask for, ms.
 LOOKAHEAD_MS_RANGE = (0, 1000)
+#: ``plate_start``'s bound: the plate timeline wraps a start to the plate's length anyway; a
+#: bound keeps a client's number a number of seconds, not 1e300.
+MAX_PLATE_START_S = 3600.0
 #: The frame rates and image formats a session may ask for.
 FPS_CHOICES = (10, 12, 15, 20, 24, 25, 30, 50, 60)
 FORMATS = ("jpeg", "webp")
@@ -85,6 +101,7 @@ class Config:
     audio_rate: Optional[int] = None
     lookahead: Optional[float] = None     # seconds
     specs: Optional[bool] = None
+    plate_start: Optional[float] = None   # seconds
 
 
 @dataclass(frozen=True)
@@ -107,7 +124,12 @@ class Ping:
     pass
 
 
-Message = Union[Config, Push, Clock, Stop, Ping]
+@dataclass(frozen=True)
+class End:
+    """The audio stream has ended (module docstring)."""
+
+
+Message = Union[Config, Push, Clock, Stop, Ping, End]
 
 
 def _number(obj: dict, key: str, what: str) -> float:
@@ -169,13 +191,25 @@ def parse(text: str) -> Message:
         specs = obj.get("specs")
         if specs is not None and not isinstance(specs, bool):
             raise ProtocolError("config: specs must be true or false")
+        start = obj.get("plate_start")
+        if start is not None and (isinstance(start, bool) or not isinstance(start, (int, float))
+                                  or not 0 <= start <= MAX_PLATE_START_S):
+            raise ProtocolError(f"config: plate_start must be 0..{MAX_PLATE_START_S:g} s")
         return Config(None if fps is None else float(fps), fmt, quality, None if rate is None else int(rate),
-                      None if look is None else float(look) / 1000.0, specs)
+                      None if look is None else float(look) / 1000.0, specs,
+                      None if start is None else float(start))
     if kind == "stop":
         return Stop()
     if kind == "ping":
         return Ping()
-    raise ProtocolError(f"unknown message type {str(kind)[:20]!r}; valid: config, push, clock, stop, ping")
+    if kind == "end":
+        extra = sorted(k for k in obj if k != "type")
+        if extra:
+            # a field here is a client that means something end does not do (a time, a
+            # count): say so rather than end a stream differently from what it asked
+            raise ProtocolError(f"end: takes no fields, got {', '.join(repr(k[:20]) for k in extra[:3])}")
+        return End()
+    raise ProtocolError(f"unknown message type {str(kind)[:20]!r}; valid: config, push, clock, stop, end, ping")
 
 
 def audio_samples(data: bytes, rate: Optional[int]):

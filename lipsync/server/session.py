@@ -11,6 +11,7 @@ now rather than queueing old ones: the browser shows the head in sync, at a lowe
 from __future__ import annotations
 
 import asyncio
+import secrets
 import time
 from typing import Optional
 
@@ -54,17 +55,27 @@ class LiveSession:
         # audio (binary messages): the stream's rate, look-ahead, and the frames it made due
         self.audio_rate: Optional[int] = None
         self.audio_lookahead: Optional[float] = None
+        # a place of its own on a real subject's idle plate, so that two sessions (two heads
+        # on one page) do not blink in unison; config's plate_start chooses it
+        plate = server.plate
+        self.plate_start = 0.0 if plate is None else secrets.randbelow(len(plate)) / plate.fps
         self.audio_started: Optional[float] = None   # monotonic time of the first audio
         self.audio_s = 0.0                           # seconds of audio received
         self.due = -1                                # newest frame the audio made due
         self.specs = False
+        # the end of the audio ({"type": "end"}): the first frame it made due, the stream's
+        # frame count, and whether the client has been told
+        self.end_from: Optional[int] = None
+        self.end_frames: Optional[int] = None
+        self.end_sent = False
 
     # ------------------------------------------------------------------ lifecycle
     def _animator(self) -> LiveAnimator:
         if self.live is None:
             s = self.server
             self.live = LiveAnimator(s.bank, fps=self.fps, map=s.pmap, timing=s.config.timing,
-                                     renderer=s.pool, prepare=False, audio_lookahead=self.audio_lookahead)
+                                     renderer=s.pool, prepare=False, audio_lookahead=self.audio_lookahead,
+                                     plate_start=self.plate_start)
             h, w = self.live.shape
             c = self.live.renderer.channels  # 4 for a bank with transparency
             self._frame = np.empty((h, w, c), np.uint8)
@@ -88,6 +99,18 @@ class LiveSession:
                 await sender
             except (asyncio.CancelledError, Exception):
                 pass
+            await self._release(self.live)
+            self.live = None
+
+    async def _release(self, live: Optional[LiveAnimator]) -> None:
+        """Free an animator's recogniser and return its memory to the system (issue 38: a
+        closed session's ~30 MB stayed with the server)."""
+        if live is None:
+            return
+        try:
+            await asyncio.get_running_loop().run_in_executor(self.server.executor, live.close)
+        except RuntimeError:  # the server is shutting down: its pool takes no more work
+            live.close()
 
     # ------------------------------------------------------------------ input
     async def _read(self) -> None:
@@ -169,8 +192,13 @@ class LiveSession:
                 if started:
                     raise protocol.ProtocolError("config: fps can only change before the first push")
                 self.fps, renew = msg.fps, True
+            if msg.plate_start is not None and msg.plate_start != self.plate_start:
+                if started:
+                    raise protocol.ProtocolError("config: plate_start can only change before the first push or audio")
+                self.plate_start, renew = msg.plate_start, True
             if renew:
-                self.live = None
+                old, self.live = self.live, None
+                await self._release(old)
                 self._animator()
             if prepare or (renew and self.audio_rate is not None):
                 # load the recogniser now (~0.5 s), not when the first audio is due
@@ -188,6 +216,24 @@ class LiveSession:
             self.clock_t = None
         elif isinstance(msg, protocol.Ping):
             await self.ws.send_json({"type": "pong"})
+        elif isinstance(msg, protocol.End):
+            await self._end()
+
+    async def _end(self) -> None:
+        """``{"type": "end"}``: the audio has ended; the frames of its last look-ahead fall due
+        (the sender sends every one, then ``{"type": "end", "frames": N}``)."""
+        if self.audio_started is None or self.live is None:
+            raise protocol.ProtocolError("end: no audio has been streamed in this session (end closes an "
+                                         "audio stream)")
+        if self.end_frames is not None:
+            raise protocol.ProtocolError("end: the audio has already ended")
+        live = self.live
+        due = await asyncio.get_running_loop().run_in_executor(self.server.executor, live.finish_audio)
+        self.end_from = due[0] if due else self.due + 1
+        self.end_frames = live.frames_total
+        if due:
+            self.due = max(self.due, due[-1])
+        self.wake.set()
 
     async def _error(self, text: str) -> None:
         self.errors += 1
@@ -224,7 +270,7 @@ class LiveSession:
         if self.specs:
             spec = live.spec(n)
             await self.ws.send_json({"type": "spec", "n": n, "from": spec.from_viseme, "to": spec.to_viseme,
-                                     "alpha": round(float(spec.alpha), 6)})
+                                     "alpha": round(float(spec.alpha), 6), "cue": live.cue(n)})
         await self.ws.send_bytes(data)
         self.last_sent = n
         self.frames_sent += 1
@@ -238,8 +284,16 @@ class LiveSession:
                 # than AUDIO_SKIP_FRAMES behind skips to the newest (the head stays in sync)
                 live = self.live
                 if self.last_sent < self.due:
-                    n = self.last_sent + 1 if self.due - self.last_sent <= AUDIO_SKIP_FRAMES else self.due
+                    n = self.last_sent + 1
+                    if self.due - self.last_sent > AUDIO_SKIP_FRAMES:
+                        # behind: skip to the newest, but never past the end's frames (the
+                        # last sound's, which the client asked for with "end")
+                        n = self.due if self.end_from is None else max(n, self.end_from)
                     await self._send_frame(live, n)
+                    continue
+                if self.end_frames is not None and not self.end_sent and live is self.live:
+                    self.end_sent = True
+                    await self.ws.send_json({"type": "end", "frames": self.end_frames})
                     continue
                 self.wake.clear()
                 await self.wake.wait()

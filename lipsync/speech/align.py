@@ -842,6 +842,9 @@ def _can_fork() -> bool:
 
     if "fork" not in multiprocessing.get_all_start_methods():
         return False
+    # a daemonic process (serve's job worker, a pool's worker) may not start children
+    if multiprocessing.current_process().daemon:
+        return False
     if threading.current_thread() is not threading.main_thread():
         return False
     monitor = getattr(tqdm, "monitor", None)
@@ -915,9 +918,10 @@ class _PhoneLoop:
         _aligner()  # loaded once, here, so the worker starts with it in place
         context = multiprocessing.get_context("fork")
         self._conn, send = context.Pipe(duplex=False)
-        self._proc = context.Process(target=_loop_worker, args=(send, self._pcm, os.getpid()), daemon=True,
-                                     name="lipsync-phone-loop")
-        self._proc.start()
+        proc = context.Process(target=_loop_worker, args=(send, self._pcm, os.getpid()), daemon=True,
+                               name="lipsync-phone-loop")
+        proc.start()
+        self._proc = proc   # only once started: _end joins it
         send.close()
 
     def __call__(self) -> Optional[np.ndarray]:

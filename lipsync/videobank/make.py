@@ -285,8 +285,9 @@ def observe(sources: List[Source], pmap, cfg: VideoBankConfig, seconds: Dict[str
             speeches.append(transcribe(s, pmap, quiet=True, jobs=cfg.jobs, lang=cfg.lang))
             bar.update(n)
         seconds["align"] = time.perf_counter() - t
-        # before the longer work: is there a pause long enough to show the rest shape?
-        if not any(select.rest_frames(sp.visemes, i, s.info.fps, n)
+        # before the longer work: is there a pause long enough to show the rest shape? (speech
+        # read off the face is checked once the face is tracked)
+        if not any(sp.from_face for sp in speeches) and not any(select.rest_frames(sp.visemes, i, s.info.fps, n)
                    for sp, s, n in zip(speeches, sources, counts)
                    for i, span in enumerate(sp.visemes) if span.label == pmap.silence):
             raise InputError(f"no silence to take the rest shape ({pmap.silence}) from: leave a second of "
@@ -299,9 +300,29 @@ def observe(sources: List[Source], pmap, cfg: VideoBankConfig, seconds: Dict[str
                           track_frames(read_video(s.path, info=s.info), fps=s.info.fps, size=s.info.size,
                                        source=str(s.path), mesh=mesh, progress=bar.update))
         seconds["track"] = time.perf_counter() - t
+    speeches = _label_from_face(speeches, tracks, pmap)
     ref = stabilise.reference_pose([tr.points[tr.found] for tr in tracks])
     regs = [stabilise.register_track(tr.points, tr.found, ref) for tr in tracks]
     return Footage(sources=sources, speeches=speeches, tracks=tracks, regs=regs)
+
+
+def _label_from_face(speeches: List[Speech], tracks: list, pmap) -> List[Speech]:
+    """Speech whose sound named nothing, labelled by lip shape (:func:`.speech.from_face`),
+    with a warning saying so; then the rest shape's pause is checked."""
+    from .speech import from_face
+
+    out = []
+    for sp, tr in zip(speeches, tracks):
+        if sp.from_face:
+            warnings.warn(f"{sp.source.name}: nothing in its sound could be recognised as speech (no words or "
+                          f"phones); the pictures are chosen by lip shape alone", UserWarning, stacklevel=4)
+            sp = from_face(sp, tr.points, tr.found, tr.fps, pmap)
+            if not any(select.rest_frames(sp.visemes, i, tr.fps, len(tr))
+                       for i, span in enumerate(sp.visemes) if span.label == pmap.silence):
+                raise InputError(f"no quiet stretch to take the rest shape ({pmap.silence}) from: leave a second of "
+                                 f"silence, mouth closed and relaxed, before or after speaking", path=sp.source.path)
+        out.append(sp)
+    return out
 
 
 def cut_and_choose(footage: Footage, finalists: Dict[str, List[Candidate]], cfg: VideoBankConfig, *,
@@ -460,6 +481,9 @@ def assemble(outdir: Path, footage: Footage, ranked: Dict[str, List[Candidate]],
             "transcript": s.text_from if not (sp.recognised and s.text is not None)
             else f"{s.text_from} (not used: it does not fit the speech; the words were recognised)",
             "lang": cfg.lang or "en", "words": list(sp.words), "recognised": sp.recognised,
+            # what the mouth shapes' times came from: words, phones heard without words
+            # (recognition in other languages), or the lips alone (nothing could be named)
+            "shapes_from": "lip shape" if sp.from_face else ("words" if sp.words else "phones"),
             "confidence": None if sp.confidence is None else round(sp.confidence, 3),
             "face_found": round(float(tr.found.mean()), 4),
             "residual_median": round(float(np.nanmedian(reg.residual)), 4),

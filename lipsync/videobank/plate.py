@@ -1,8 +1,8 @@
 """The idle plate: a stretch of the speaker's own video kept in the bank, so renders live.
 
 A bank's pictures are stills; a person is not. ``lipsync render`` of a bank with a plate
-shows, at every frame, one frame of this stretch (played forwards, then backwards:
-:func:`lipsync.composite.plate.pingpong`, so the loop has no seam) with the morphed lower
+shows, at every frame, one frame of this stretch (played forwards, and joined to itself
+where its frames match, never mid-blink: :mod:`lipsync.composite.plate_time`) with the morphed lower
 face moved onto it (:class:`lipsync.composite.plate.PlateCompositor`): the blinks, the
 glances and the small head motion are the speaker's own.
 
@@ -10,7 +10,8 @@ Chosen here (:func:`choose_stretch`), from the frames :func:`lipsync.videobank.m
 has already tracked and registered: the window of :data:`PLATE_SECONDS` (or the whole
 video, if shorter) in which the **lower face moves least** (the jaw's drop and the lips'
 opening, frame to frame, in eye distances: speech there would show around the mask's
-edge), the **head moves least** (the still points' centre, frame to frame, and how far it
+edge), the **face above the nose moves as the speaker's does** (not stiller: within
+:data:`NATURAL_BAND` of the footage's mean, :func:`upper_motion`), the **head moves least** (the still points' centre, frame to frame, and how far it
 wanders over the window) and turns least (the stabilisation residual), with the face found
 in every frame; shorter windows (down to 1.5 s) when no 4 s one keeps the head still.
 The frames are cut at the bank's framing by **one** transform, the stretch's mean pose
@@ -49,10 +50,14 @@ import numpy as np
 #: bank.yaml's file names.
 VIDEO_NAME, POSES_NAME, MASK_NAME = "plate.mp4", "plate.json", "plate-mask.png"
 #: Length of the idle stretch: long enough to hold a blink or two (people blink every
-#: 2-10 s) and a few glances; played back and forth, it never repeats within 2x this.
+#: 2-10 s) and a few glances; longer output joins it to itself (lipsync.composite.plate_time).
 PLATE_SECONDS = 4.0
 #: Lengths tried, longest first, until one is idle (:data:`IDLE_SPREAD`).
 PLATE_LENGTHS = (PLATE_SECONDS, 3.0, 2.0, 1.5)
+#: Shorter lengths tried only when no window of PLATE_LENGTHS has the face in every frame
+#: (a face that leaves the picture every second, issue 38): a short plate is extended by
+#: joins (lipsync.composite.plate_time), and 0.5 s still holds a blink's whole 0.2-0.4 s.
+SHORT_LENGTHS = (1.0, 0.5)
 #: A stretch whose head wanders more than this (standard deviation of the still points'
 #: centre, eye distances) is not idle: the 2-D pose cannot follow a head that turns, and
 #: the pasted lower face then shows it (a webcam speaker looking down at a keyboard,
@@ -68,6 +73,14 @@ RESIDUAL_WEIGHT = 1.0
 #: The head's own steps (the eyes' centre, eye distances per frame) count this much: a step
 #: of the whole head is seen all over the picture, a jaw's only around the mask's edge.
 HEAD_WEIGHT = 2.0
+#: The plate moves as the speaker does, not less (issue 36: grid-s1's stillest clip moved a
+#: quarter as much above the nose as the speaker's footage): a stretch whose motion above the
+#: nose (:func:`upper_motion`, mean) is within this share of the footage's own is natural;
+#: one outside it loses to any inside it (after idleness and length).
+NATURAL_BAND = 0.4
+#: Within a video, each frame's distance from the footage's typical motion above the nose
+#: (eye distances per frame) counts this much in the window's cost: still frames cost too.
+NATURAL_WEIGHT = 2.0
 
 
 @dataclass(frozen=True)
@@ -80,6 +93,7 @@ class Stretch:
     motion: float      # mean lower-face motion, eye distances per frame
     residual: float    # median pose residual, eye distances
     spread: float = 0.0  # how far the head wanders in it (SD of the still points' centre), eye distances
+    natural: float = 1.0  # its motion above the nose over the footage's (upper_motion, means)
 
     def __len__(self) -> int:
         return self.stop - self.start
@@ -129,6 +143,21 @@ def head_motion(points: np.ndarray) -> np.ndarray:
     return out
 
 
+def upper_motion(points: np.ndarray) -> np.ndarray:
+    """Per frame, how far the face-mesh points above the nose tip (brows, lids, eyes, the
+    nose's bridge) moved since the frame before, mean over the points, eye distances (0 for
+    frame 0, NaN without a face): the head's motion and the eyes' together, as they are seen."""
+    from ..face.measure import eye_distance
+
+    p = np.asarray(points, np.float64)[..., :2]
+    ref = np.nanmedian(p, axis=0)
+    above = np.nonzero(ref[:, 1] < ref[4, 1])[0]  # point 4: the nose tip
+    out = np.zeros(len(p))
+    if above.size and len(p) > 1:
+        out[1:] = np.linalg.norm(np.diff(p[:, above], axis=0), axis=-1).mean(axis=-1) / eye_distance(p)[1:]
+    return out
+
+
 def lower_face_motion(points: np.ndarray) -> np.ndarray:
     """Per frame, how far the jaw and lips moved since the frame before, eye distances (NaN
     where either frame lacks a face; frame 0 is 0)."""
@@ -155,33 +184,55 @@ def choose_stretch(footage) -> Stretch:
     from ..face.measure import eye_distance
 
     best = None
+    ups = [upper_motion(tr.points) for tr in footage.tracks]
+    for u, tr in zip(ups, footage.tracks):
+        u[~tr.found] = np.nan
+        u[1:][~tr.found[:-1]] = np.nan  # a step from a frame without a face is no step
+    everything = np.concatenate(ups)
+    # the speaker's own motion above the nose
+    typical = float(np.nanmean(everything)) if np.isfinite(everything).any() else 0.0
     for v, (tr, reg) in enumerate(zip(footage.tracks, footage.regs)):
         n = len(tr)
         cost = lower_face_motion(tr.points) + HEAD_WEIGHT * head_motion(tr.points) + RESIDUAL_WEIGHT * reg.residual
+        cost = cost + NATURAL_WEIGHT * np.abs(np.nan_to_num(ups[v], nan=typical) - typical)
         cost[~tr.found] = np.nan
         # where the head is (the still points' centre, eye distances): a window in which it
         # wanders far is not idle, even if it moves slowly
         d = float(np.nanmedian(eye_distance(tr.points)))
         where = tr.points[:, list(T.STILL_POINTS), :2].mean(axis=1) / d * HEAD_WEIGHT
-        for seconds in PLATE_LENGTHS:
+        for seconds in PLATE_LENGTHS + SHORT_LENGTHS:
             length = min(n, int(round(seconds * tr.fps)))
             a, b = best_window(cost, length, where)
             if b == 0:
                 continue  # the face lost somewhere in every window: shorter
             spread = float(np.sqrt(np.nansum(np.nanvar(where[a:b] / HEAD_WEIGHT, axis=0))))
-            if spread <= IDLE_SPREAD or seconds == PLATE_LENGTHS[-1] or length == n:
+            if spread <= IDLE_SPREAD or seconds <= PLATE_LENGTHS[-1] or length == n:
                 break
         if b == 0:
             continue
+        natural = float(np.nanmean(ups[v][a + 1:b])) / max(typical, 1e-9) if b - a > 1 else 1.0
         s = Stretch(video=v, start=a, stop=b, motion=float(np.nanmean(lower_face_motion(tr.points)[a:b])),
-                    residual=float(np.nanmedian(reg.residual[a:b])), spread=spread)
-        # idle first, then longer (more life), then stiller
-        key = (spread > IDLE_SPREAD, -len(s), float(np.mean(cost[a:b])) + spread)
+                    residual=float(np.nanmedian(reg.residual[a:b])), spread=spread, natural=natural)
+        # idle first, then longer (more life), then moving as the speaker does, then the cost
+        key = (spread > IDLE_SPREAD, -len(s), max(0.0, abs(natural - 1.0) - NATURAL_BAND),
+               float(np.mean(cost[a:b])) + spread)
         if best is None or key < best[0]:
             best = (key, s)
     if best is None:
-        raise ValueError("no stretch of video with the face in every frame")
+        from ..errors import InputError
+
+        raise InputError(f"no {SHORT_LENGTHS[-1]:g} s of video with the face in every frame, for the idle plate "
+                         f"(the face leaves the picture, or is lost, too often: film it in view)",
+                         path=footage.names)
     return best[1]
+
+
+def _eyes(points: np.ndarray, found: np.ndarray) -> np.ndarray:
+    from ..face.measure import eye_opening
+
+    e = eye_opening(points)
+    e[~np.asarray(found, bool)] = np.nan
+    return e
 
 
 def stretch_poses(framing, reg, start: int, stop: int) -> Tuple[np.ndarray, np.ndarray]:
@@ -225,8 +276,12 @@ def write_plate(folder: Path, footage, framing, meshes, rest: str) -> str:
     doc = {"fps": tr.fps, "frames": len(s), "size": [w, h],
            "source": {"video": src.name, "start_frame": s.start, "stop_frame": s.stop,
                       "lower_face_motion": round(s.motion, 5), "pose_residual": round(s.residual, 5),
-                      "head_spread": round(s.spread, 5)},
+                      "head_spread": round(s.spread, 5), "motion_above_nose_vs_footage": round(s.natural, 3)},
            "poses": [[round(float(x), 5) for x in p.ravel()] for p in poses],
+           # each frame's eye opening (face mesh, lipsync.face.measure): where its blinks are, which
+           # the plate's timeline never joins into or out of (lipsync.composite.plate_time)
+           "eyes": [None if not np.isfinite(e) else round(float(e), 5)
+                    for e in _eyes(tr.points[s.start:s.stop], tr.found[s.start:s.stop])],
            # the rest picture's face mesh (bank pixels): the plate's colour is matched on its still skin
            "rest_mesh": [[round(float(x), 3) for x in p[:2]] for p in meshes[rest]]}
     (folder / POSES_NAME).write_text(json.dumps(doc) + "\n", encoding="utf-8")

@@ -15,7 +15,7 @@
 
   // What the page did, for the browser test and for anyone curious (console: lipsyncMic).
   const stats = { frames: 0, drawn: 0, errors: 0, samples: 0, rate: 0, lookahead: null, fps: 25,
-                  specs: {}, numbers: [], maxLateMs: 0, started: false };
+                  specs: {}, numbers: [], maxLateMs: 0, started: false, stoppedAt: null, endFrames: null };
   window.lipsyncMic = stats;
   let ws = null, audioCtx = null, stream = null, node = null, delay = null, source = null;
   const pending = [];   // decoded frames waiting for their time: [n, bitmap]
@@ -24,7 +24,14 @@
 
   // Audio time the head shows now: the audio sent, less the look-ahead (the frame of time t
   // is made when the audio reaches t + look-ahead).
-  function headTime() { return stats.rate ? stats.samples / stats.rate - stats.lookahead : 0; }
+  // After Stop no audio comes: the head plays on in real time to the end of what was sent
+  // (the last look-ahead's frames, which the server sends on {"type": "end"}).
+  function headTime() {
+    if (!stats.rate) return 0;
+    const sent = stats.samples / stats.rate;
+    if (stats.stoppedAt === null) return sent - stats.lookahead;
+    return Math.min(sent, sent - stats.lookahead + (performance.now() / 1000 - stats.stoppedAt));
+  }
 
   function drawDue() {
     const t = headTime();
@@ -38,7 +45,8 @@
       best[1].close();
       stats.drawn++;
     }
-    if (stats.started) requestAnimationFrame(drawDue);
+    const ending = stats.stoppedAt !== null && (stats.endFrames === null || pending.length);
+    if (stats.started || ending) requestAnimationFrame(drawDue);
   }
 
   async function onFrame(buf) {
@@ -72,6 +80,9 @@
           stats.lookahead = msg.audio_lookahead;
           show("lookahead", Math.round(stats.lookahead * 1000) + " ms");
         }
+      } else if (msg.type === "end") {
+        stats.endFrames = msg.frames;
+        status.textContent += "; " + msg.frames + " frames in all";
       } else if (msg.type === "spec") {
         stats.specs[msg.n] = [msg.from, msg.to, msg.alpha];
       } else if (msg.type === "error") {
@@ -126,6 +137,11 @@
 
   function stop() {
     stats.started = false;
+    stats.stoppedAt = performance.now() / 1000;
+    if (node) { node.port.onmessage = null; node.disconnect(); }   // nothing is sent after the end
+    // the stream has ended: the server sends the frames of its last look-ahead, drawn as
+    // the head's time reaches them
+    if (stats.samples) { send(JSON.stringify({ type: "end" })); requestAnimationFrame(drawDue); }
     if (stream) stream.getTracks().forEach((t) => t.stop());
     if (audioCtx) audioCtx.close();
     stopBtn.disabled = true;
