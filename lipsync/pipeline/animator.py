@@ -87,6 +87,10 @@ class Animator:
         The selected samples (None: the viseme morph).
     """
 
+    #: The selected mouth samples (None: the viseme morph; a subclass that skips
+    #: :meth:`_attach_samples`, such as the live path's, keeps the morph).
+    sample_path = None
+
     def __init__(self, bank: Union[Bank, str, "os.PathLike[str]"], timeline, fps: float = DEFAULT_FPS, *,
                  map: Union[str, "os.PathLike[str]", PhonemeMap, None] = None, method: str = "flow",
                  timing=None, store: Optional[FlowStore] = None, timeline_options=None, still: bool = False,
