@@ -67,9 +67,9 @@ def _blinks(frames, mesh) -> list:
     return [int(n) + 1 for n in np.nonzero(np.abs(np.diff(grey)) > 3 * sigma)[0]]
 
 
-def _session_frames(bank, pcm):
+def _session_frames(bank, pcm, **options):
     """Feed in 20 ms chunks; render each frame when it falls due (and the last ones at the end)."""
-    live = LiveAnimator(bank, fps=25)
+    live = LiveAnimator(bank, fps=25, **options)
     frames = {}
     for i in range(0, len(pcm), BLOCK):
         for n in live.feed_audio(pcm[i:i + BLOCK], RATE):
@@ -188,13 +188,7 @@ def test_a_session_started_elsewhere_on_the_plate_equals_render_live_there(bank,
     above the nose it is the plate's timeline from S, not from 0 (issue 36 item 3)."""
     pcm, wav = speech
     pcm = pcm[:RATE]                                   # 1 s: 25 frames
-    live = LiveAnimator(bank, fps=25, plate_start=1.2)
-    frames = {}
-    for i in range(0, len(pcm), BLOCK):
-        for n in live.feed_audio(pcm[i:i + BLOCK], RATE):
-            frames[n] = live.frame(n).copy()
-    for n in live.finish_audio():
-        frames[n] = live.frame(n).copy()
+    live, frames = _session_frames(bank, pcm, plate_start=1.2)
     assert sorted(frames) == list(range(25))
     clip = tmp_path / "one.wav"
     import wave
