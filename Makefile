@@ -70,3 +70,4 @@ docs-images: $(STAMP)
 	$(BIN)/python tools/atlas_picture.py docs/atlas.jpg
 	$(BIN)/python tools/real_strip.py docs/strip-real.png
 	$(BIN)/python tools/dub_strip.py docs/strip-dub.png
+	$(BIN)/python tools/samples_strip.py docs/strip-samples.png docs/mouth-samples.png

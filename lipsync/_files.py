@@ -21,6 +21,7 @@ Examples
 
 from __future__ import annotations
 
+import errno
 import os
 import re
 import shutil
@@ -28,6 +29,19 @@ from pathlib import Path
 from typing import Callable, List, Tuple, Union
 
 PathLike = Union[str, "os.PathLike[str]"]
+
+#: Why a file or folder cannot be written, by errno, in words a user can act on (the
+#: messages built on it name OUT or the cache, never a hidden temporary name the OS gave).
+WRITE_ERRORS = {
+    errno.ENOSPC: "the disk is full",
+    errno.EDQUOT: "the disk quota is used up",
+    errno.EROFS: "the file system is read-only",
+    errno.EACCES: "no permission to write there",
+    errno.EPERM: "no permission to write there",
+    errno.EEXIST: "a file stands where a folder on its path must be",
+    errno.ENOTDIR: "a file stands where a folder on its path must be",
+    errno.ENAMETOOLONG: "the name is too long for the file system",
+}
 
 PARTIAL = ".partial-"
 

@@ -67,9 +67,9 @@ def _blinks(frames, mesh) -> list:
     return [int(n) + 1 for n in np.nonzero(np.abs(np.diff(grey)) > 3 * sigma)[0]]
 
 
-def _session_frames(bank, pcm):
+def _session_frames(bank, pcm, **options):
     """Feed in 20 ms chunks; render each frame when it falls due (and the last ones at the end)."""
-    live = LiveAnimator(bank, fps=25)
+    live = LiveAnimator(bank, fps=25, **options)
     frames = {}
     for i in range(0, len(pcm), BLOCK):
         for n in live.feed_audio(pcm[i:i + BLOCK], RATE):
@@ -142,7 +142,9 @@ def test_a_serve_session_of_grid_s1_sends_the_plate_frames(speech):
             got = {}
             async with await _connect(srv) as ws:
                 await ws.recv()
-                await ws.send(json.dumps({"type": "config", "audio_rate": 16000}))
+                # the plate where render --live and a default LiveAnimator start (a session
+                # otherwise starts at a place of its own: test_serve_sessions_start_apart)
+                await ws.send(json.dumps({"type": "config", "audio_rate": 16000, "plate_start": 0}))
                 await ws.recv()
                 for i in range(0, len(pcm), 8000):          # half-second messages
                     await ws.send(pcm[i:i + 8000].astype("<i2").tobytes())
@@ -179,3 +181,69 @@ def test_a_serve_session_of_grid_s1_sends_the_plate_frames(speech):
     theirs = above_nose_changes([plate.frames[plate.index(n, 25.0)] for n in ns], rows)
     ours = above_nose_changes([got[n] for n in ns], rows)
     assert np.corrcoef(ours, theirs)[0, 1] > 0.5 and theirs.mean() > 0.3
+
+
+def test_a_session_started_elsewhere_on_the_plate_equals_render_live_there(bank, speech, tmp_path):
+    """``LiveAnimator(plate_start=S)`` shows what ``render --live --plate-start S`` shows, and
+    above the nose it is the plate's timeline from S, not from 0 (issue 36 item 3)."""
+    pcm, wav = speech
+    pcm = pcm[:RATE]                                   # 1 s: 25 frames
+    live, frames = _session_frames(bank, pcm, plate_start=1.2)
+    assert sorted(frames) == list(range(25))
+    clip = tmp_path / "one.wav"
+    import wave
+
+    with wave.open(str(clip), "wb") as w:
+        w.setnchannels(1), w.setsampwidth(2), w.setframerate(RATE)
+        w.writeframes(pcm.astype("<i2").tobytes())
+    r = subprocess.run([sys.executable, "-m", "lipsync", "render", str(clip), "--live", "--plate-start", "1.2",
+                        "--bank", str(GRID_BANK), "-o", f"{tmp_path / 'frames'}/", "--quiet"],
+                       capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    files = sorted((tmp_path / "frames").glob("*.png"))
+    assert len(files) == 25
+    for n, f in enumerate(files):
+        assert np.array_equal(cv2.cvtColor(cv2.imread(str(f)), cv2.COLOR_BGR2RGB), frames[n]), n
+    plate = live.plate
+    mesh = np.asarray(json.loads((GRID_BANK / "plate.json").read_text())["rest_mesh"], np.float64)
+    rows = above_nose_rows(mesh) - 3
+    line = plate.timeline(1.2)
+    assert line.frame(0) == 30 % len(plate)            # 1.2 s into the plate at its 25 fps
+    for n in (0, 12, 24):
+        assert np.array_equal(frames[n][:rows], plate.frames[plate.index(n, 25.0, line)][:rows])
+        assert not np.array_equal(frames[n][:rows], plate.frames[plate.index(n, 25.0)][:rows])
+    with pytest.raises(Exception, match="plate_start"):
+        LiveAnimator(bank, fps=25, prepare=False, plate_start=-1.0)
+
+
+def test_serve_sessions_start_apart_on_the_plate_unless_told():
+    """Each `serve` session starts at a place of its own on the plate (two heads on one page
+    do not blink in unison); config's plate_start sets it, within its bound."""
+    import asyncio
+
+    from test_serve import Running, _connect
+
+    srv = Running(bank=str(GRID_BANK), max_sessions=8, idle_timeout=30)
+    try:
+        async def run():
+            async with await _connect(srv) as ws:
+                await ws.recv()
+                await ws.send(json.dumps({"type": "config", "plate_start": 2.0}))
+                reply = json.loads(await asyncio.wait_for(ws.recv(), 10))
+                assert reply["type"] == "config", reply
+                await ws.send(json.dumps({"type": "config", "plate_start": 1e9}))
+                bad = json.loads(await asyncio.wait_for(ws.recv(), 10))
+                assert bad["type"] == "error" and "plate_start" in bad["error"], bad
+                await ws.send(json.dumps({"type": "ping"}))
+                assert json.loads(await asyncio.wait_for(ws.recv(), 10))["type"] == "pong"  # still serving
+
+        asyncio.run(run())
+        from lipsync.server.session import LiveSession
+
+        # a session is made per connection; only where it starts is looked at here
+        sessions = [LiveSession(srv.server, websocket=None).plate_start for _ in range(8)]
+    finally:
+        srv.stop()
+    plate_s = len(srv.server.plate) / srv.server.plate.fps
+    assert all(0 <= s < plate_s for s in sessions)
+    assert len(set(sessions)) > 1, sessions

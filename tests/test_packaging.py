@@ -40,6 +40,7 @@ OWN = {
     "lipsync/editor/static": "the editor page: our own HTML, JS and CSS, no library vendored",
     "lipsync/server/static": "the live player page: our own HTML, JS and CSS, no library vendored",
     "lipsync/atlas/static": "the atlas player: our own HTML and JS, no library vendored",
+    "lipsync/timing_editor/static": "the timing editor page: our own HTML, JS and CSS (the waveform on a plain canvas), no library vendored",
 }
 
 

@@ -35,6 +35,12 @@ it, the mouth, jaw and chin of its own chosen frame, moved onto the plate's pose
 matched on the skin around it and blended in with a feathered mask (one face: see
 docs/make-a-subject.md). Nothing else was changed.
 
+`samples.mp4` and `samples.npz` are the mouth samples (docs/formats.md, "Mouth samples"):
+the lower face of every frame of the ten sentences, cut from the video at integer offsets
+(not resampled) and stored at H.264 crf 8, with each frame's lip measures, phones and its
+place in the sentence. `lipsync render` and `lipsync dub` select one per frame
+(`--samples off`: the nine pictures, morphed).
+
 The sentences: {clips}.
 
 From the GRID audio-visual speech corpus: M. Cooke, J. Barker, S. Cunningham and X. Shao

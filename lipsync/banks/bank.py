@@ -168,6 +168,24 @@ class PlateFiles:
     enabled: bool = True
 
 
+class _SamplesSpec(BaseModel):
+    # bank.yaml ``samples:`` (lipsync.samples): the mouth samples of a bank made from video
+    model_config = ConfigDict(extra="forbid")
+    video: str
+    table: str
+    enabled: bool = True
+
+
+@dataclass(frozen=True)
+class SampleFiles:
+    """bank.yaml ``samples:``: the mouth-sample crops and their table (:mod:`lipsync.samples`),
+    loaded by :func:`lipsync.samples.load_samples` when a render uses them."""
+
+    video: Path
+    table: Path
+    enabled: bool = True
+
+
 class _BankSpec(BaseModel):
     model_config = ConfigDict(extra="forbid")
     name: str
@@ -184,6 +202,7 @@ class _BankSpec(BaseModel):
     visemes: Dict[str, _VisemeSpec]
     composite: Optional[_CompositeSpec] = None
     plate: Optional[_PlateSpec] = None
+    samples: Optional[_SamplesSpec] = None
 
     @field_validator("timing")
     @classmethod
@@ -380,6 +399,9 @@ class Bank:
     plate : PlateFiles or None
         bank.yaml's ``plate``: the idle stretch of the speaker's video a render composites
         the morphed lower face onto (banks made from video; ``enabled: false`` turns it off).
+    samples : SampleFiles or None
+        bank.yaml's ``samples``: the real mouth samples a render selects per frame
+        (:mod:`lipsync.samples`; ``enabled: false`` renders one picture per viseme).
 
     Examples
     --------
@@ -404,6 +426,7 @@ class Bank:
     coarticulation: Optional[DominanceParams] = field(default=None, repr=False)
     refine: bool = True
     plate: Optional[PlateFiles] = field(default=None, repr=False)
+    samples: Optional[SampleFiles] = field(default=None, repr=False)
 
     @property
     def feature_names(self) -> Tuple[str, ...]:
@@ -986,8 +1009,15 @@ def _build(root, data, folder: Path, yaml_path: Path, image_cache) -> Bank:
                 fail(f"plate {key}: file {rel!r} not found", ["plate", key])
             files[key] = real
         plate = PlateFiles(enabled=spec.plate.enabled, **files)
+    samples = None
+    if spec.samples is not None:  # the files are read and checked by lipsync.samples.load_samples
+        got = {k: inside(getattr(spec.samples, k), f"samples {k}", ["samples", k]) for k in ("video", "table")}
+        for k, real in got.items():
+            if not real.is_file():
+                fail(f"samples {k}: file {getattr(spec.samples, k)!r} not found", ["samples", k])
+        samples = SampleFiles(enabled=spec.samples.enabled, **got)
 
     return Bank(path=folder, name=spec.name, rest=spec.rest, warp=spec.warp, symmetry=spec.symmetry,
                 names=names, line_names=tuple(line_names), images=images, lines=lines, features=features,
-                composite=composite, timing=spec.timing, refine=spec.refine, plate=plate,
+                composite=composite, timing=spec.timing, refine=spec.refine, plate=plate, samples=samples,
                 coarticulation=spec.coarticulation.apply() if spec.coarticulation is not None else None)

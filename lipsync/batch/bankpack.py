@@ -85,6 +85,8 @@ def pack_bank(folder) -> BankPack:
     if bank.plate is not None:  # the idle plate of a bank made from video: a worker renders on it too
         rels += [str(PurePosixPath(os.path.normpath(data["plate"][k]).replace(os.sep, "/")))
                  for k in ("video", "poses", "mask")]
+    if bank.samples is not None:  # its mouth samples (lipsync.samples): a worker selects from them too
+        rels += [str(PurePosixPath(os.path.normpath(data["samples"][k]).replace(os.sep, "/"))) for k in ("video", "table")]
     files = tuple((rel, (folder / rel).read_bytes()) for rel in rels)
     return BankPack(digest=_digest(files), name=bank.name, names=bank.names, files=files)
 

@@ -48,4 +48,11 @@ def run(args: argparse.Namespace) -> int:
                 damaged += 1
     extra = f", {damaged} damaged (lipsync preprocess recomputes them)" if damaged else ""
     print(f"  flow store {store.root}: {present} of {len(pairs)} pairs present{extra}")
+    if bank.samples is not None:  # read and validated whole: a broken file exits 2 naming it
+        from ..samples import load_samples
+        from dataclasses import replace
+
+        s = load_samples(replace(bank, samples=replace(bank.samples, enabled=True)))
+        print(f"  samples: {len(s)} mouth samples from {len(s.clips)} clip(s), {s.crops.shape[2]}x{s.crops.shape[1]} "
+              f"crops, {int(s.run.max()) + 1} runs{'' if bank.samples.enabled else ' (switched off)'}")
     return 0

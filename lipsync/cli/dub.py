@@ -55,6 +55,9 @@ def add_parser(sub) -> None:
     add_store_option(p)
     add_jobs_option(p)
     add_quiet_option(p)
+    from ._samples import add_samples_option
+
+    add_samples_option(p)
     p.set_defaults(func=run)
 
 
@@ -69,7 +72,7 @@ def run(args: argparse.Namespace) -> int:
     report = dub(args.video, args.audio, out, text=args.text, bank=args.bank, video_text=args.video_text,
                  map=args.map, timing=args.timing, crf=args.crf, preset=args.preset, store=args.store,
                  jobs=args.jobs, quiet=args.quiet, cache=args.cache, lang=args.lang, video_lang=args.video_lang,
-                 plate_start=args.plate_start)
+                 plate_start=args.plate_start, samples=args.samples)
     if not args.quiet:
         print(report.summary(), file=sys.stderr)
     return 0

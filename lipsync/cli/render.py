@@ -59,6 +59,9 @@ def add_parser(sub) -> None:
     add_quiet_option(p)
     add_timeline_options(p)
     add_live_options(p)
+    from ._samples import add_samples_option
+
+    add_samples_option(p)
     p.set_defaults(func=run)
 
 
@@ -95,7 +98,8 @@ def run(args: argparse.Namespace) -> int:
                          map=args.map, method=args.method, timing=args.timing, format=args.format,
                          crf=args.crf, preset=args.preset, store=args.store, jobs=args.jobs,
                          quiet=args.quiet, timeline_options=args, background=background, composite=composite,
-                         still=args.still, plate_start=_plate_start(args.plate_start))
+                         still=args.still, plate_start=_plate_start(args.plate_start),
+                         samples=args.samples)
     if not args.quiet:
         print(report.summary(), file=sys.stderr)
     return 0

@@ -126,6 +126,10 @@ class LiveAnimator:
         --live`` make it: the speaker blinks and moves on the session's clock. The plate is
         decoded once per process and shared by every animator of the bank
         (:func:`lipsync.live.pool.shared_plate`).
+    plate_start : float
+        Seconds into the idle plate where the session starts (as ``--plate-start``; default
+        0, where ``lipsync render --live`` starts): sessions given different starts do not
+        blink in unison (``lipsync serve`` gives each session its own).
 
     Notes
     -----
@@ -144,7 +148,7 @@ class LiveAnimator:
                  method: str = "flow", lookahead: Optional[float] = None, store: Optional[FlowStore] = None,
                  renderer: Optional[RendererPool] = None, prepare: Optional[bool] = None,
                  audio_lookahead: Optional[float] = None, events_at: str = "start",
-                 longest_event: float = LONGEST_EVENT_S, still: bool = False):
+                 longest_event: float = LONGEST_EVENT_S, still: bool = False, plate_start: float = 0.0):
         self.bank = bank if isinstance(bank, Bank) else Bank.load(bank)
         self.pmap = map if isinstance(map, PhonemeMap) else load_map(map or DEFAULT_MAP)
         self._map_path = map if isinstance(map, (str, os.PathLike)) and os.path.isfile(map) else None
@@ -166,6 +170,11 @@ class LiveAnimator:
             preprocess(self.bank, store=self.renderer.store, quiet=True, normalised=self.renderer.nb)
         #: The idle plate frames are composited onto (None: the still pictures).
         self.plate = None if still else shared_plate(self.bank)
+        if not (isinstance(plate_start, (int, float)) and np.isfinite(plate_start) and plate_start >= 0):
+            raise InputError(f"plate_start must be a number of seconds, 0 or more (got {plate_start!r})")
+        #: Where on the plate the session starts, seconds.
+        self.plate_start = float(plate_start)
+        self._plate_line = None if self.plate is None else self.plate.timeline(self.plate_start)
         self._mouth = threading.local()   # each render thread its own morphed frame
         self._state = threading.Lock()   # the track and its plan (the pool guards the renderers)
         self._warned: set = set()
@@ -648,7 +657,7 @@ class LiveAnimator:
         # the plate frame due at the session's clock (frame n, as the offline Animator's frame
         # n), with only the lower face's box of the morph made and composited onto it
         self.renderer.render(spec.from_viseme, spec.to_viseme, spec.alpha, out=mouth, region=self.plate.region)
-        return self.plate.render_into(max(int(n), 0), self.fps, mouth, out)
+        return self.plate.render_into(max(int(n), 0), self.fps, mouth, out, self._plate_line)
 
     def frame_at(self, t: float, *, out: Optional[np.ndarray] = None) -> np.ndarray:
         """The frame for playback time ``t`` seconds, RGB ``uint8`` ``(H, W, 3)`` (RGBA ``(H, W, 4)``

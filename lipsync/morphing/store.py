@@ -376,6 +376,24 @@ class FlowStore:
             # A read-only bank (installed package) still renders; it just cannot cache.
 
     # ----------------------------------------------------------------------- housekeeping
+    # ----------------------------------------------------------------------- sample joins
+    def join_key(self, parts: List[bytes]) -> str:
+        """The key of a flow between two mouth samples (lipsync.composite.samples): its inputs' bytes."""
+        return self._key([f"lipsync-join-v{FORMAT_VERSION}".encode(), *parts])
+
+    def join_path(self, key: str) -> Path:
+        return self.root / "joins" / f"{key}.npz"
+
+    def get_join(self, key: str) -> Optional[np.ndarray]:
+        """The stored flow for ``key``, or None (absent or damaged: a miss, with a warning)."""
+        got = self._read_entry(self.join_path(key), key)
+        return None if got is None or "flow" not in got[1] else got[1]["flow"]
+
+    def put_join(self, key: str, flow: np.ndarray) -> None:
+        """Store a join's flow under ``key`` (written atomically)."""
+        self._write_entry(self.join_path(key), {"key": key, "kind": "join"},
+                          {"flow": np.ascontiguousarray(flow, np.float32)})
+
     def clean_temps(self) -> None:
         for sub in ("flows", "images"):
             _clean_stale_temps(self.root / sub)  # the ".tmp-PID-..." of earlier versions

@@ -70,6 +70,10 @@ class Animator:
     plate_start : float, optional
         Seconds into the idle plate where the clip starts (``--plate-start``); default: a
         place derived from the timeline (:func:`lipsync.composite.plate_time.default_start`).
+    samples : {None, "on", "off"} or bool
+        Whether a bank with mouth samples (bank.yaml ``samples:``, banks made from video)
+        shows a real sample per frame on its plate (:mod:`lipsync.pipeline.samplepath`);
+        None: as bank.yaml says; ``"off"``: one picture per viseme, morphed.
 
     Attributes
     ----------
@@ -79,12 +83,18 @@ class Animator:
         The mapped viseme timeline.
     plate : lipsync.composite.plate.Plate or None
         The idle plate frames are composited onto (None: the still pictures).
+    sample_path : lipsync.pipeline.samplepath.SamplePath or None
+        The selected samples (None: the viseme morph).
     """
+
+    #: The selected mouth samples (None: the viseme morph; a subclass that skips
+    #: :meth:`_attach_samples`, such as the live path's, keeps the morph).
+    sample_path = None
 
     def __init__(self, bank: Union[Bank, str, "os.PathLike[str]"], timeline, fps: float = DEFAULT_FPS, *,
                  map: Union[str, "os.PathLike[str]", PhonemeMap, None] = None, method: str = "flow",
                  timing=None, store: Optional[FlowStore] = None, timeline_options=None, still: bool = False,
-                 plate_start: Optional[float] = None):
+                 plate_start: Optional[float] = None, samples=None):
         self.bank = bank if isinstance(bank, Bank) else Bank.load(bank)
         self.fps = check_fps(fps)
         if not isinstance(timeline, Timeline):
@@ -102,6 +112,20 @@ class Animator:
                                                closures=pmap.closures, classes=viseme_classes(pmap, self.bank.rest))
         self.renderer = Renderer(self.bank, method=method, store=store)
         self._attach_plate(still, plate_start)
+        self._attach_samples(samples, timeline, pmap, store)
+
+    def _attach_samples(self, option, timeline, pmap, store) -> None:
+        """Select the bank's mouth samples when it has them, they are on and frames go onto its plate."""
+        from .samplepath import SamplePath, bank_samples
+
+        self.sample_path = None
+        self.phones, self.pmap = timeline, pmap  # what a dub's own sample path selects for
+        if self.plate is None or not self.specs:
+            return
+        samples = bank_samples(self.bank, option)
+        if samples is not None:
+            self.sample_path = SamplePath(samples, self.specs, timeline, self.fps, pmap, self.bank.rest,
+                                          store=store or FlowStore.for_bank(self.bank), timing=self.timing)
 
     def _attach_plate(self, still: bool, plate_start: Optional[float] = None) -> None:
         """The bank's idle plate to composite onto, unless ``still`` (or the bank has none),
@@ -192,6 +216,11 @@ class Animator:
         mouth = getattr(self._mouth, "frame", None)
         if mouth is None:
             mouth = self._mouth.frame = np.empty_like(out)
+        if self.sample_path is not None:
+            j = self.plate.index(index, self.fps, self.plate_line)
+            np.copyto(out, self.plate.frames[j])
+            pose = self.plate.poses[j]
+            return self.sample_path.render_onto(index, out, pose, self.sample_path.prepared(j, pose, out.shape))
         # only the lower face's box of the morph is read: only that box is rendered
         self.renderer.render(spec.from_viseme, spec.to_viseme, spec.alpha, out=mouth, region=self.plate.region)
         return self.plate.render_into(index, self.fps, mouth, out, self.plate_line)

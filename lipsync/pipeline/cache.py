@@ -48,6 +48,7 @@ from typing import Optional
 import numpy as np
 
 from ..errors import InputError, PathLike
+from .._files import WRITE_ERRORS
 
 __all__ = ["CacheWarning", "Entry", "FrameStore", "cache_root", "open_entry", "load_track", "save_track",
            "load_bank", "remove_item", "free_bytes"]
@@ -57,21 +58,10 @@ class CacheWarning(UserWarning):
     """The cache could not be used; the dub goes on without it."""
 
 
-#: Why a cache or a temporary folder cannot be written, by errno, in words a user can act on.
-_WRITE_ERRORS = {
-    errno.ENOSPC: "the disk is full",
-    errno.EDQUOT: "the disk quota is used up",
-    errno.EROFS: "the file system is read-only",
-    errno.EACCES: "no permission to write there",
-    errno.EPERM: "no permission to write there",
-    errno.EEXIST: "a file stands where a folder must be",
-    errno.ENOTDIR: "a file stands where a folder must be",
-    errno.ENAMETOOLONG: "the name is too long for the file system",
-}
 
 
 def _reason(exc: OSError) -> str:
-    return _WRITE_ERRORS.get(exc.errno) or exc.strerror or str(exc)
+    return WRITE_ERRORS.get(exc.errno) or exc.strerror or str(exc)
 
 
 def cache_root() -> Path:

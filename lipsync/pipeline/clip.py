@@ -177,7 +177,7 @@ def render_clip(timeline, output: PathLike, *, bank=None, audio: Optional[PathLi
                 store=None, jobs: Optional[int] = None, quiet: bool = False,
                 timeline_options=None, progress=None, background=None, composite=None,
                 lang: Optional[str] = None, live=None, still: bool = False,
-                plate_start: Optional[float] = None) -> ClipReport:
+                plate_start: Optional[float] = None, samples=None) -> ClipReport:
     """Render one clip to ``output`` (a video, an animation, or a folder of numbered PNGs).
 
     Parameters
@@ -232,7 +232,12 @@ def render_clip(timeline, output: PathLike, *, bank=None, audio: Optional[PathLi
         so the speaker blinks and moves.
     plate_start : float, optional
         Seconds into the idle plate where the clip starts (default: derived from the
-        timeline, :class:`lipsync.Animator`'s ``plate_start``).
+        timeline, :class:`lipsync.Animator`'s ``plate_start``; with ``live``, 0, where a
+        :class:`lipsync.LiveAnimator` starts by default).
+    samples : {None, "on", "off"} or bool
+        A bank with mouth samples shows a selected real sample per frame on its plate
+        (:mod:`lipsync.pipeline.samplepath`); ``"off"``: one picture per viseme morphed, as
+        before; None: bank.yaml's ``samples:`` says.
 
     Returns
     -------
@@ -290,12 +295,12 @@ def render_clip(timeline, output: PathLike, *, bank=None, audio: Optional[PathLi
 
         anim = LiveClip(bank, timeline, fps=fps, lookahead=None if live is True else live, map=map,
                         method=method, timing=timing, store=store, quiet=quiet,
-                        still=still or not compositor.passthrough)
+                        still=still or not compositor.passthrough, plate_start=plate_start or 0.0)
     else:
         # the idle plate (a bank made from video) only where the frame is the bank's picture itself
         anim = Animator(bank, timeline, fps=fps, map=map, method=method, timing=timing, store=store,
                         timeline_options=timeline_options, still=still or not compositor.passthrough,
-                        plate_start=plate_start)
+                        plate_start=plate_start, samples=samples)
     n = len(anim)
     if n == 0:  # a video needs a frame; a timeline of no length has none to show (README: Rendering)
         where = getattr(timeline, "path", None) if hasattr(timeline, "segments") else os.fspath(timeline)

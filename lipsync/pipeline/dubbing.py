@@ -352,7 +352,7 @@ def dub(video: PathLike, audio: PathLike, output: PathLike, *, text: Optional[st
         video_text: Optional[str] = None, map=None, timing=None, crf: int = 18, preset: Optional[str] = None,
         store=None, jobs: Optional[int] = None, quiet: bool = False, cache: Optional[PathLike] = None,
         lang: Optional[str] = None, video_lang: Optional[str] = None,
-        plate_start: Optional[float] = None) -> DubReport:
+        plate_start: Optional[float] = None, samples=None) -> DubReport:
     """Re-voice ``video`` with the speech in ``audio`` (``lipsync dub``).
 
     Parameters
@@ -392,6 +392,9 @@ def dub(video: PathLike, audio: PathLike, output: PathLike, *, text: Optional[st
         heard, or from the lips alone (:func:`lipsync.videobank.speech.transcribe`).
     plate_start : float, optional
         Seconds into ``video`` where the output starts (default 0: the video as it is).
+    samples : {None, "on", "off"} or bool
+        A bank with mouth samples shows a selected real sample per frame
+        (:mod:`lipsync.pipeline.samplepath`); ``"off"``: one picture per viseme morphed.
 
     Returns
     -------
@@ -424,6 +427,7 @@ def dub(video: PathLike, audio: PathLike, output: PathLike, *, text: Optional[st
         d = grid_dir()
         print(dub(d / "bbwm5s.mpg", d / "prap6p.mpg", "dubbed.mp4", text=transcript("prap6p")).summary())
     """
+    sample_option = samples  # the name is the audio's below
     from tqdm import tqdm
 
     from .animator import Animator
@@ -506,6 +510,7 @@ def dub(video: PathLike, audio: PathLike, output: PathLike, *, text: Optional[st
     nb = anim.renderer.nb
     if any(not store.pair_path(store.pair_key(bank, a, b, nb.axis)).exists() for a, b in all_pairs(bank.names)):
         preprocess(bank, store=store, jobs=jobs, quiet=quiet, normalised=nb)
+    sample_path = _sample_path(bank, anim, sample_option, compositor, store)
     seconds["align"] += time.perf_counter() - t
 
     t = time.perf_counter()
@@ -523,6 +528,8 @@ def dub(video: PathLike, audio: PathLike, output: PathLike, *, text: Optional[st
     reader = _PlateReader(video, info, keep=not straight, count=nv)
     shape = (info.size[1], info.size[0], 3)
     geometry = [compositor.geometry(p, shape) if found else None for p, found in zip(poses, track.found)]
+    sample_geometry = geometry if sample_path is None else [
+        sample_path.compositor.plate.geometry(p, shape) if found else None for p, found in zip(poses, track.found)]
 
     def render_into(i: int, buf: np.ndarray) -> None:
         j = plate_of[i]
@@ -532,6 +539,9 @@ def dub(video: PathLike, audio: PathLike, output: PathLike, *, text: Optional[st
         mouth = getattr(scratch, "frame", None)
         if mouth is None:
             mouth = scratch.frame = np.empty(bank_shape, np.uint8)
+        if sample_path is not None:
+            sample_path.render_onto(i, buf, poses[j], geometry=sample_geometry[j])
+            return
         s = anim.specs[i]  # only the lower face's box of the morph is read: only that box is rendered
         anim.renderer.render(s.from_viseme, s.to_viseme, s.alpha, out=mouth, region=compositor.region)
         compositor.apply(mouth[..., :3], buf, poses[j], geometry[j])
@@ -553,3 +563,15 @@ def dub(video: PathLike, audio: PathLike, output: PathLike, *, text: Optional[st
     seconds["render"] = time.perf_counter() - t
     return DubReport(output=str(output), frames=n, fps=float(info.fps), size=(w, h), video_frames=nv, lost=lost,
                      bank=str(bank.path), seconds=seconds)
+
+
+def _sample_path(bank, anim, option, compositor, store):
+    """The dub's :class:`~lipsync.pipeline.samplepath.SamplePath` (None: the bank has no samples
+    or they are off)."""
+    from .samplepath import SamplePath, bank_samples
+
+    got = bank_samples(bank, option)
+    if got is None or not anim.specs:
+        return None
+    return SamplePath(got, anim.specs, anim.phones, anim.fps, anim.pmap, bank.rest, lut=compositor.lut, store=store,
+                      timing=anim.timing)

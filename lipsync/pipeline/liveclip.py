@@ -152,11 +152,12 @@ class LiveClip(Animator):
     (:func:`live_specs`): what ``render_clip(..., live=...)`` renders."""
 
     def __init__(self, bank, audio, fps: float = DEFAULT_FPS, *, lookahead: Optional[float] = None, map=None,
-                 method: str = "flow", timing=None, store=None, quiet: bool = True, still: bool = False):
+                 method: str = "flow", timing=None, store=None, quiet: bool = True, still: bool = False,
+                 plate_start: float = 0.0):
         self.bank = bank if isinstance(bank, Bank) else Bank.load(bank)
         self.specs = live_specs(audio, self.bank, fps=fps, lookahead=lookahead, map=map, timing=timing, quiet=quiet)
         self.fps = float(fps)
         self.renderer = Renderer(self.bank, method=method, store=store)
-        # the plate from its start, on the plate timeline a live session follows
-        # (Plate.index's default): render --live shows what the session shows
-        self._attach_plate(still, plate_start=0.0)
+        # the plate timeline a live session started at plate_start follows (default 0,
+        # LiveAnimator's): render --live shows what the session shows
+        self._attach_plate(still, plate_start=plate_start)

@@ -7,7 +7,9 @@ Client -> server, text frames holding one JSON object each:
   first audio), ``"lookahead": 200`` (ms, the audio look-ahead, before the first audio) and
   ``"specs": true`` (a ``{"type": "spec", "n", "from", "to", "alpha", "cue"}`` text message
   before each frame: what it shows, for checking, and its mouth shape as a cue,
-  :meth:`lipsync.LiveAnimator.cue`);
+  :meth:`lipsync.LiveAnimator.cue`); ``"plate_start": 1.5`` (seconds into a real subject's
+  idle plate where the session starts, before anything is pushed; by default each session
+  starts at a place of its own, so two heads on one page do not blink in unison);
 * binary frames: audio, 16-bit little-endian PCM mono at ``audio_rate`` (at most
   :data:`MAX_AUDIO_MESSAGE_S` per message, in real time: at most
   :data:`MAX_AUDIO_AHEAD_S` ahead of the wall clock since the first). Audio is the session's
@@ -79,6 +81,9 @@ MAX_AUDIO_MESSAGE_S = 1.0
 MAX_AUDIO_AHEAD_S = 2.0
 #: The audio look-ahead a session may ask for, ms.
 LOOKAHEAD_MS_RANGE = (0, 1000)
+#: ``plate_start``'s bound: the plate timeline wraps a start to the plate's length anyway; a
+#: bound keeps a client's number a number of seconds, not 1e300.
+MAX_PLATE_START_S = 3600.0
 #: The frame rates and image formats a session may ask for.
 FPS_CHOICES = (10, 12, 15, 20, 24, 25, 30, 50, 60)
 FORMATS = ("jpeg", "webp")
@@ -96,6 +101,7 @@ class Config:
     audio_rate: Optional[int] = None
     lookahead: Optional[float] = None     # seconds
     specs: Optional[bool] = None
+    plate_start: Optional[float] = None   # seconds
 
 
 @dataclass(frozen=True)
@@ -185,8 +191,13 @@ def parse(text: str) -> Message:
         specs = obj.get("specs")
         if specs is not None and not isinstance(specs, bool):
             raise ProtocolError("config: specs must be true or false")
+        start = obj.get("plate_start")
+        if start is not None and (isinstance(start, bool) or not isinstance(start, (int, float))
+                                  or not 0 <= start <= MAX_PLATE_START_S):
+            raise ProtocolError(f"config: plate_start must be 0..{MAX_PLATE_START_S:g} s")
         return Config(None if fps is None else float(fps), fmt, quality, None if rate is None else int(rate),
-                      None if look is None else float(look) / 1000.0, specs)
+                      None if look is None else float(look) / 1000.0, specs,
+                      None if start is None else float(start))
     if kind == "stop":
         return Stop()
     if kind == "ping":

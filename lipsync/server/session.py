@@ -11,6 +11,7 @@ now rather than queueing old ones: the browser shows the head in sync, at a lowe
 from __future__ import annotations
 
 import asyncio
+import secrets
 import time
 from typing import Optional
 
@@ -54,6 +55,10 @@ class LiveSession:
         # audio (binary messages): the stream's rate, look-ahead, and the frames it made due
         self.audio_rate: Optional[int] = None
         self.audio_lookahead: Optional[float] = None
+        # a place of its own on a real subject's idle plate, so that two sessions (two heads
+        # on one page) do not blink in unison; config's plate_start chooses it
+        plate = server.plate
+        self.plate_start = 0.0 if plate is None else secrets.randbelow(len(plate)) / plate.fps
         self.audio_started: Optional[float] = None   # monotonic time of the first audio
         self.audio_s = 0.0                           # seconds of audio received
         self.due = -1                                # newest frame the audio made due
@@ -69,7 +74,8 @@ class LiveSession:
         if self.live is None:
             s = self.server
             self.live = LiveAnimator(s.bank, fps=self.fps, map=s.pmap, timing=s.config.timing,
-                                     renderer=s.pool, prepare=False, audio_lookahead=self.audio_lookahead)
+                                     renderer=s.pool, prepare=False, audio_lookahead=self.audio_lookahead,
+                                     plate_start=self.plate_start)
             h, w = self.live.shape
             c = self.live.renderer.channels  # 4 for a bank with transparency
             self._frame = np.empty((h, w, c), np.uint8)
@@ -186,6 +192,10 @@ class LiveSession:
                 if started:
                     raise protocol.ProtocolError("config: fps can only change before the first push")
                 self.fps, renew = msg.fps, True
+            if msg.plate_start is not None and msg.plate_start != self.plate_start:
+                if started:
+                    raise protocol.ProtocolError("config: plate_start can only change before the first push or audio")
+                self.plate_start, renew = msg.plate_start, True
             if renew:
                 old, self.live = self.live, None
                 await self._release(old)

@@ -63,6 +63,9 @@ class VideoBankConfig:
         candidates' median lip opening moved further from the rest's
         (:data:`lipsync.videobank.select.SPAN_GAIN`); off: near the median (closures are the
         closed ones either way).
+    samples : bool
+        Keep every usable lower-face frame as a mouth sample (:mod:`lipsync.samples`; needs
+        ``one_face``): renders select real frames and join them with flows.
     """
 
     map: str = DEFAULT_MAP
@@ -74,6 +77,7 @@ class VideoBankConfig:
     flows: bool = True
     one_face: bool = True
     span: bool = True
+    samples: bool = True
     lang: Optional[str] = None
 
     def __post_init__(self):

@@ -517,6 +517,11 @@ def assemble(outdir: Path, footage: Footage, ranked: Dict[str, List[Candidate]],
                                     header=header, timing=TIMING)
         from .plate import write_plate
         text_yaml += write_plate(tmp, footage, pictures.framing, pts, pmap.silence)  # the idle plate (issue 28)
+        if cfg.samples and pictures.plate is not None:  # the real mouth samples (issue 35)
+            from ..samples.build import write_samples
+
+            text_yaml += write_samples(tmp, footage, pictures.framing, pts[pmap.silence], images[files[pmap.silence]],
+                                       quiet=cfg.quiet)
         Bank.from_text(text_yaml, tmp, images=images)  # never write a bank that would not load
         write_bank_text(tmp / "bank.yaml", text_yaml)
         bank = Bank.load(tmp)

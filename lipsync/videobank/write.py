@@ -19,7 +19,6 @@ Examples
 
 from __future__ import annotations
 
-import errno
 import json
 import os
 import re
@@ -31,6 +30,7 @@ from typing import Dict, List, Mapping, Optional, Sequence
 import numpy as np
 
 from ..errors import InputError, PathLike
+from .._files import WRITE_ERRORS
 
 #: The report and the preview sheet, written beside bank.yaml.
 REPORT_NAME = "init-report.json"
@@ -83,30 +83,18 @@ def _resolved(p: Path) -> Path:
         return Path(os.path.abspath(p))
 
 
-#: Why the bank could not be written, by errno, in words a user can act on (each also
-#: names OUT, never the hidden staging folder the OS named).
-_WRITE_ERRORS = {
-    errno.ENOSPC: "the disk is full",
-    errno.EDQUOT: "the disk quota is used up",
-    errno.EROFS: "the file system is read-only",
-    errno.EACCES: "no permission to write there",
-    errno.EPERM: "no permission to write there",
-    errno.EEXIST: "a file stands where a folder on its path must be",
-    errno.ENOTDIR: "a file stands where a folder on its path must be",
-    errno.ENAMETOOLONG: "the name is too long for the file system",
-}
 
 
 def write_error(exc: OSError, outdir: Path) -> Exception:
     """``exc`` as an error naming ``outdir``: an InputError (exit 2) for the errnos of
-    :data:`_WRITE_ERRORS`, else an OSError naming ``outdir``.
+    :data:`WRITE_ERRORS`, else an OSError naming ``outdir``.
 
     Examples
     --------
     >>> str(write_error(OSError(28, "No space left on device", "/x/.me.partial-1-ab/C.png"), Path("me")))
     'me: cannot write the bank: the disk is full (nothing was written)'
     """
-    reason = _WRITE_ERRORS.get(exc.errno)
+    reason = WRITE_ERRORS.get(exc.errno)
     if reason is None:
         return type(exc)(exc.errno, f"cannot write the bank {outdir}: {exc.strerror or exc}")
     return InputError(f"cannot write the bank: {reason} (nothing was written)", path=outdir)

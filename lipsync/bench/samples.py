@@ -1,0 +1,465 @@
+"""Mouth samples (``samples``, issue 35): real frames selected per frame against one picture per viseme.
+
+A bank is made from GRID's :data:`~lipsync.bench.grid.BANK_CLIPS` (three in ``--quick``)
+with its samples; the held-out sentences (:func:`~lipsync.bench.grid.held_out`) are
+
+* **rendered** from their own alignment on the bank's plate three ways from the same bank
+  and cues — **samples** (``--samples on``), **old morph** (``--samples off``, one picture
+  per viseme, the flow morph) and **hard cuts** (the nearer picture, no morph) — each
+  encoded as ``lipsync render`` encodes (H.264, crf 18, talking-head) and decoded;
+* **dubbed**: held-out video A re-voiced with held-out B's sound and transcript
+  (:func:`lipsync.dub`, the same bank, samples on and off).
+
+Measured on the decoded frames (the face mesh tracked through them): **lip r** (inner-lip
+opening against B's real frames, mean over sentences), **sharpness** (median variance of
+the Laplacian of the mouth box, :func:`lipsync.bench.videobank.mouth_sharpness`) over the
+real frames' (render) or the input video's (dub), **closed** (share of frames the sequencer
+shows a P/B/M closure whose tracked opening is at most
+:data:`lipsync.selection.select.CLOSED`), **range** (standard deviation of the opening over
+the real one's), **pops** (99th percentile of the grey change above the nose over the
+real clips'), and a **detector AUC**: logistic regression (numpy, :func:`logistic_auc`) on
+HOG and Laplacian-histogram features of 64x48 mouth crops, real frames re-encoded the
+same way, cross-validated by sentence (0.5: cannot tell them apart).
+
+Sharpness per stage: the source crops (the footage's mouth box), the crops as stored
+(``samples.mp4`` decoded), the frames as pasted (before encoding), as encoded.
+
+Cost: selection seconds per second of speech (a 10-minute timeline of held-out alignments
+joined), CPU per frame (``time.thread_time``) of today's frame and of a samples frame at
+the bank's 360x288 and at 1280x720 (a bank of three clips scaled up), the wall time of
+``lipsync dub`` of 30 s (fresh cache: the bank made from the video, samples included), and
+the bank's size on disk.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import time
+import warnings
+from pathlib import Path
+from typing import Dict, List
+
+import numpy as np
+
+from . import FIGURES, Context
+from . import grid
+
+#: The renderings compared, in the order printed.
+METHODS = ("samples", "samples, joins cut", "old morph", "hard cuts")
+#: Held-out sentences from this index on tuned the selection (lipsync.selection.select.WEIGHTS,
+#: TARGET_GAIN, lipsync.selection.plan.JOIN_FRAMES): the figure judges on the ones before.
+TUNED_FROM = 24
+#: Mouth crops the detector sees: (W, H) grey.
+CROP = (64, 48)
+
+
+def _make(out: Path, videos: List[Path], texts) -> Path:
+    from ..videobank import make_bank
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return make_bank(out, videos, texts=texts, force=True, quiet=True).path
+
+
+def _encoded(frames, tmp: Path, fps: float) -> List[np.ndarray]:
+    """``frames`` through the product's encoder (H.264 crf 18, talking-head) and decoded back."""
+    from ..face.video import read_video
+    from ..pipeline.clip import write_video
+
+    path = tmp / "enc.mp4"
+    write_video(frames, path, fps=fps)
+    out = [np.array(f) for f in read_video(path)]
+    path.unlink()
+    return out
+
+
+def _frames(bank, clip: str, method: str) -> tuple:
+    """Clip's frames rendered by ``method``, and the Animator (its specs and selection)."""
+    from ..pipeline.animator import Animator
+
+    from ..selection import plan
+
+    fps = grid.track(clip).fps
+    keep, plan.JOIN_FRAMES = plan.JOIN_FRAMES, 0 if method == "samples, joins cut" else plan.JOIN_FRAMES
+    try:
+        anim = Animator(bank, grid.alignment_of(clip).phones, fps=fps,
+                        samples="on" if method.startswith("samples") else "off")
+    finally:
+        plan.JOIN_FRAMES = keep
+    n = min(len(anim), len(grid.track(clip)))
+    if method == "hard cuts":
+        out = []
+        for i in range(n):
+            s = anim.specs[i]
+            mouth = anim.renderer.render(s.from_viseme, s.to_viseme, float(round(s.alpha)))
+            j = anim.plate.index(i, fps, anim.plate_line)
+            buf = anim.plate.frames[j].copy()
+            out.append(anim.plate.compositor.apply_prepared(mouth, buf, anim.plate._prepared[j]))
+        return out, anim
+    return [anim.frame(i).copy() for i in range(n)], anim
+
+
+def crop_features(frame: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """HOG (OpenCV's, 64x48 window, 16x16 blocks, 8x8 cells, 9 bins) and a 16-bin histogram
+    of the absolute Laplacian of the mouth box (:func:`lipsync.face.compare.mouth_box`),
+    resized to :data:`CROP`."""
+    import cv2
+
+    from ..face.compare import mouth_box
+
+    x0, y0, x1, y1 = mouth_box(points, frame.shape[:2])
+    g = cv2.cvtColor(np.ascontiguousarray(frame[y0:y1, x0:x1, :3]), cv2.COLOR_RGB2GRAY)
+    g = cv2.resize(g, CROP, interpolation=cv2.INTER_AREA)
+    hog = cv2.HOGDescriptor(CROP, (16, 16), (8, 8), (8, 8), 9).compute(g).ravel()
+    lap = np.abs(cv2.Laplacian(g.astype(np.float32), cv2.CV_32F))
+    hist = np.histogram(np.minimum(lap, 63.0), bins=16, range=(0, 64))[0] / lap.size
+    return np.concatenate([hog, hist]).astype(np.float64)
+
+
+def logistic_auc(x: np.ndarray, y: np.ndarray, groups: np.ndarray, folds: int = 5, l2: float = 1.0,
+                 steps: int = 300) -> float:
+    """Cross-validated AUC of an L2 logistic regression (gradient descent, features
+    standardised on the training folds), folds made of whole ``groups`` (sentences).
+
+    Examples
+    --------
+    >>> rng = np.random.default_rng(0)
+    >>> x = rng.normal(size=(200, 3)); y = (np.arange(200) % 2).astype(float); g = np.arange(200) // 10
+    >>> 0.3 < logistic_auc(x, y, g) < 0.7                 # noise: chance
+    True
+    >>> x[:, 0] += 3 * y
+    >>> logistic_auc(x, y, g) > 0.95
+    True
+    """
+    ids = np.unique(groups)
+    scores = np.zeros(len(y))
+    for k in range(folds):
+        test = np.isin(groups, ids[k::folds])
+        mu, sd = x[~test].mean(0), x[~test].std(0) + 1e-9
+        a, b = (x[~test] - mu) / sd, y[~test]
+        w, c = np.zeros(a.shape[1]), 0.0
+        for _ in range(steps):
+            p = 1.0 / (1.0 + np.exp(-(a @ w + c)))
+            w -= 0.5 * (a.T @ (p - b) / len(b) + l2 * w / len(b))
+            c -= 0.5 * float((p - b).mean())
+        scores[test] = ((x[test] - mu) / sd) @ w + c
+    return auc(scores, y)
+
+
+def auc(scores: np.ndarray, y: np.ndarray) -> float:
+    """Area under the ROC curve: the Mann-Whitney rank statistic, ties given their mean rank.
+
+    Examples
+    --------
+    >>> auc(np.array([0.1, 0.4, 0.35, 0.8]), np.array([0, 0, 1, 1]))
+    0.75
+    """
+    s = np.asarray(scores, np.float64)
+    order = np.argsort(s, kind="mergesort")
+    ranks = np.empty(len(s))
+    ranks[order] = np.arange(1, len(s) + 1)
+    _, inv = np.unique(s, return_inverse=True)
+    ranks = (np.bincount(inv, ranks) / np.bincount(inv))[inv]
+    pos = y == 1
+    n1, n0 = int(pos.sum()), int((~pos).sum())
+    return float((ranks[pos].sum() - n1 * (n1 + 1) / 2) / max(1, n1 * n0))
+
+
+def _measure(frames, anim, fps: float, mesh, real_open: np.ndarray, closures) -> Dict[str, object]:
+    """What a figure reads off decoded frames: the opening and its r with the real one, mouth
+    sharpness, the opening on the closure frames, the pops, the detector's features."""
+    from ..face import measure as M
+    from ..face.track import track_frames
+    from ..selection.select import CLOSED
+    from .videobank import _closure_frames, mouth_sharpness
+
+    tr = track_frames(frames, fps=fps, mesh=mesh)
+    n = min(len(frames), len(real_open))
+    opening = M.lip_opening(tr.points)[:n]
+    shut = _closure_frames(anim.specs[:n], closures) & np.isfinite(opening)
+    return {"r": grid.correlation(opening, real_open[:n]), "open": opening, "real_open": real_open[:n],
+            "sharp": mouth_sharpness(frames, tr.points), "closed": opening[shut] <= CLOSED,
+            "pops": grid.above_nose_pops(frames, tr.points) if tr.found.any() else np.nan,
+            "features": [crop_features(f, p) for f, p, ok in zip(frames, tr.points, tr.found) if ok],
+            "points": tr.points}
+
+
+def _render_rows(ctx: Context, bank, clips: List[str], mesh, rows: List[dict]) -> None:
+    """The held-out sentences rendered three ways (and the real frames), one row each."""
+    from ..face.video import read_video
+    from ..phonetics.phonemes import DEFAULT_MAP, load_map
+    from .videobank import mouth_sharpness
+
+    closures = set(load_map(DEFAULT_MAP).closures)
+    got: Dict[str, Dict[str, list]] = {m: {} for m in ("real",) + METHODS}
+    raw_sharp: Dict[str, list] = {m: [] for m in METHODS}
+    for clip in clips:
+        rt = grid.track(clip)
+        real_open = grid.real_measures(clip)["opening"]
+        real = [np.array(f) for f in read_video(grid.video(clip))]
+        anim = None
+        for m in METHODS:
+            frames, anim = _frames(bank, clip, m)
+            dec = _encoded(frames, ctx.tmp, rt.fps)
+            got_m = _measure(dec, anim, rt.fps, mesh, real_open, closures)
+            raw_sharp[m].append(np.nanmedian(mouth_sharpness(frames, got_m.pop("points"))))
+            for k, v in got_m.items():
+                got[m].setdefault(k, []).append(v)
+            got[m].setdefault("clip", []).append([clip] * len(got_m["features"]))
+        real_m = _measure(_encoded(real, ctx.tmp, rt.fps), anim, rt.fps, mesh, real_open, closures)
+        real_m.pop("points")
+        real_m["raw_sharp"] = np.nanmedian(mouth_sharpness(real, rt.points))
+        for k, v in real_m.items():
+            got["real"].setdefault(k, []).append(v)
+        got["real"].setdefault("clip", []).append([clip] * len(real_m["features"]))
+    _quality_rows("render", got, raw_sharp, "real", rows, len(clips))
+
+
+def _quality_rows(what: str, got, raw_sharp, reference: str, rows: List[dict], count: int) -> None:
+    """One row per method: r, sharpness, closed, range, pops against ``reference`` and the detector's AUC."""
+    ref = got[reference]
+    ref_sharp = float(np.nanmedian(np.concatenate(ref["sharp"])))
+    ref_pops = float(np.nanmean(ref["pops"]))
+    real_feats = np.array([f for fs in ref["features"] for f in fs])
+    real_groups = np.array([c for cs in ref["clip"] for c in cs])
+    ref_open = np.concatenate(got[reference].get("real_open", ref["open"]))
+    for m in [k for k in got if k != reference and got[k]]:
+        g = got[m]
+        feats = np.array([f for fs in g["features"] for f in fs])
+        groups = np.concatenate([real_groups, np.array([c for cs in g["clip"] for c in cs])])
+        x = np.concatenate([real_feats, feats])
+        y = np.concatenate([np.zeros(len(real_feats)), np.ones(len(feats))])
+        opening = np.concatenate(g["open"])
+        real_open = np.concatenate(g["real_open"])
+        ok = np.isfinite(opening) & np.isfinite(real_open)
+        closed = np.concatenate(g["closed"])
+        sharp = float(np.nanmedian(np.concatenate(g["sharp"])))
+        row = {"figure": "samples", "case": f"{what}: {m} ({count} held-out sentences)",
+               "lip_r": round(float(np.nanmean(g["r"])), 3),
+               "sharpness_vs_" + reference: round(sharp / ref_sharp, 3),
+               "pbm_closed": round(float(closed.mean()) if closed.size else float("nan"), 3),
+               "range": round(float(opening[ok].std() / real_open[ok].std()), 3),
+               "pops_over_" + reference: round(float(np.nanmean(g["pops"])) / ref_pops, 2),
+               "detector_auc": round(logistic_auc(x, y, groups), 3)}
+        if raw_sharp is not None and m in raw_sharp:
+            row["sharpness_before_encoding"] = round(float(np.nanmedian(raw_sharp[m])) / float(
+                np.nanmedian(ref.get("raw_sharp", [ref_sharp]))), 3)
+        rows.append(row)
+    rows.append({"figure": "samples", "case": f"{what}: {reference} frames, re-encoded",
+                 "pbm_closed": round(float(np.concatenate(ref["closed"]).mean()), 3) if "closed" in ref else None,
+                 "mouth_sharpness": round(ref_sharp, 1), "pops_p99": round(ref_pops, 2),
+                 "open_std": round(float(np.nanstd(ref_open)), 4)})
+
+
+def _dub_rows(ctx: Context, bank, pairs, mesh, rows: List[dict]) -> None:
+    """Held-out video A re-voiced with held-out B's speech, samples on and off; against A's own frames."""
+    from ..face.video import read_video
+    from ..phonetics.phonemes import DEFAULT_MAP, load_map
+    from ..pipeline.animator import Animator
+    from ..pipeline.dubbing import dub
+
+    closures = set(load_map(DEFAULT_MAP).closures)
+    got: Dict[str, Dict[str, list]] = {"input": {}, "dub samples": {}, "dub old morph": {}}
+    for a, b in pairs:
+        fps = grid.track(b).fps
+        real_open = grid.real_measures(b)["opening"]
+        anim = Animator(bank, grid.alignment_of(b).phones, fps=fps, samples="off")  # the same schedule as dub's
+        for m, option in (("dub samples", "on"), ("dub old morph", "off")):
+            out = ctx.tmp / f"dub-{a}-{b}-{option}.mp4"
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                dub(grid.video(a), grid.video(b), out, text=grid.transcript(b), bank=bank, quiet=True,
+                    cache=ctx.tmp / "dub-cache", samples=option)
+            frames = [np.array(f) for f in read_video(out)]
+            got_m = _measure(frames, anim, fps, mesh, real_open, closures)
+            got_m.pop("points")
+            for k, v in got_m.items():
+                got[m].setdefault(k, []).append(v)
+            got[m].setdefault("clip", []).append([b] * len(got_m["features"]))
+        src = _encoded([np.array(f) for f in read_video(grid.video(a))], ctx.tmp, fps)
+        inp = _measure(src, anim, fps, mesh, grid.real_measures(a)["opening"], closures)
+        inp.pop("points")
+        for k, v in inp.items():
+            got["input"].setdefault(k, []).append(v)
+        got["input"].setdefault("clip", []).append([b] * len(inp["features"]))
+    _quality_rows("dub", got, None, "input", rows, len(pairs))
+
+
+def _stage_rows(bank, rows: List[dict]) -> None:
+    """Sharpness of the samples before any render: the crops as cut from the source frames
+    against the same crops as stored (samples.mp4, H.264 crf lipsync.samples.store.CROP_CRF)."""
+    from ..face.video import read_video
+    from ..pipeline.samplepath import bank_samples
+    from ..videobank.select import sharpness
+
+    s = bank_samples(bank, "on")
+    clips = [str(c) for c in s.clips]
+    first = np.nonzero(s.clip == 0)[0]
+    src = {i: np.array(f) for i, f in enumerate(read_video(grid.video(Path(clips[0]).stem)))}
+    from ..samples.build import _cut
+
+    h, w = s.crops.shape[1:3]
+    box = (0, 0, w, h)
+    ratios = []
+    for k in first[::5]:
+        cut = np.ascontiguousarray(_cut(src[int(s.frame[k])], tuple(int(x) for x in s.origin[k]), (w, h)))
+        ratios.append(sharpness(s.crops[k], box) / max(sharpness(cut, box), 1e-9))
+    rows.append({"figure": "samples", "case": f"stage: crops as stored ({len(ratios)} of {clips[0]}'s)",
+                 "sharpness_vs_source_crop": round(float(np.median(ratios)), 3)})
+
+
+def frame_cost(bank, video: Path, speech: str, repeat: int = 3) -> Dict[str, float]:
+    """CPU ms per frame (this thread) of a dub's frame onto ``video``'s decoded frames: today's
+    (the viseme morph of the mouth box and its composite) against a samples frame (the paste
+    or, across a join, the morph), the frame copy excluded from both."""
+    from ..composite.plate import PlateCompositor
+    from ..face.video import probe_video, read_video
+    from ..pipeline.animator import Animator
+    from ..pipeline.dubbing import bank_face, colour_table, plate_poses, video_track
+    from ..pipeline.samplepath import SamplePath, bank_samples
+
+    info = probe_video(video)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        track = video_track(video, info, entry=None, quiet=True)
+    frames = [np.array(f) for f in read_video(video)]
+    mask, mesh = bank_face(bank)
+    poses = plate_poses(mesh, track)
+    comp = PlateCompositor(mask, lut=colour_table(bank, video, track, poses, mesh, mask))
+    anim = Animator(bank, grid.alignment_of(speech).phones, fps=info.fps, samples="off", still=True)
+    sp = SamplePath(bank_samples(bank, "on"), anim.specs, anim.phones, anim.fps, anim.pmap, bank.rest,
+                    lut=comp.lut)
+    ok = [i for i in range(len(frames)) if track.found[i]]
+    geo = {i: comp.geometry(poses[i], frames[0].shape) for i in ok}
+    sgeo = {i: sp.compositor.plate.geometry(poses[i], frames[0].shape) for i in ok}
+    mouth = np.empty(anim.renderer.shape + (3,), np.uint8)
+    buf = np.empty_like(frames[0])
+    n = min(len(anim), len(ok))
+
+    def today(i):
+        j = ok[i]
+        s = anim.specs[i]
+        anim.renderer.render(s.from_viseme, s.to_viseme, s.alpha, out=mouth, region=comp.region)
+        comp.apply(mouth, buf, poses[j], geo[j])
+
+    def samples(i):
+        j = ok[i]
+        sp.render_onto(i, buf, poses[j], geometry=sgeo[j])
+
+    out = {}
+    for name, fn in (("today", today), ("samples", samples)):
+        best = np.inf
+        for _ in range(repeat):
+            t0 = time.thread_time()
+            for i in range(n):
+                np.copyto(buf, frames[ok[i]])
+                fn(i)
+            t1 = time.thread_time()
+            for i in range(n):
+                np.copyto(buf, frames[ok[i]])
+            best = min(best, (t1 - t0 - (time.thread_time() - t1)) / n * 1000)
+        out[name] = best
+    out["joins"] = float(sp.selection.joins.mean())
+    out["size"] = "x".join(map(str, info.size))
+    return out
+
+
+def _cost_rows(ctx: Context, banks: Dict[str, tuple], rows: List[dict]) -> None:
+    from ..banks.bank import Bank
+
+    for label, (bank_path, video, speech) in banks.items():
+        c = frame_cost(Bank.load(bank_path), video, speech, repeat=1 if ctx.quick else 3)
+        rows.append({"figure": "samples", "case": f"cost per frame onto {c['size']} video ({label}), one core",
+                     "today_ms": round(c["today"], 3), "samples_ms": round(c["samples"], 3),
+                     "samples_over_today": round(c["samples"] / c["today"], 2),
+                     "frames_at_a_join": round(c["joins"], 3)})
+
+
+def _selection_rows(bank, rows: List[dict]) -> None:
+    """Selection time per second of speech over a 10-minute timeline (held-out alignments joined)."""
+    from ..motion.timeline import Segment, Timeline
+    from ..pipeline.animator import Animator
+    from ..pipeline.samplepath import bank_samples, _selector
+
+    segs, t = [], 0.0
+    held = grid.held_out()
+    while t < 600.0:
+        for c in held:
+            tl = grid.alignment_of(c).phones
+            segs += [Segment(s.start + t, s.end + t, s.label) for s in tl.segments]
+            t += tl.duration
+            if t >= 600.0:
+                break
+    tl = Timeline(tuple(segs), kind="phoneme")
+    anim = Animator(bank, tl, fps=25, samples="off")
+    sel = _selector(bank_samples(bank, "on"), anim.pmap, bank.rest)
+    t0 = time.perf_counter()
+    got = sel.select(anim.specs, tl, 25.0)
+    wall = time.perf_counter() - t0
+    rows.append({"figure": "samples", "case": f"selection of a {t / 60:.1f}-minute timeline",
+                 "seconds": round(wall, 2), "seconds_per_speech_second": round(wall / t, 4),
+                 "candidates_per_frame": round(got.candidates, 1), "mean_run_frames": round(got.runs(), 2),
+                 "samples_in_bank": len(sel.samples)})
+
+
+def _size_rows(bank_path: Path, rows: List[dict]) -> None:
+    files = {p.name: p.stat().st_size for p in Path(bank_path).iterdir() if p.is_file()}
+    rows.append({"figure": "samples", "case": "bank size on disk",
+                 "samples_mp4_kB": round(files.get("samples.mp4", 0) / 1024), "samples_npz_kB":
+                 round(files.get("samples.npz", 0) / 1024), "whole_bank_kB": round(sum(files.values()) / 1024)})
+
+
+def _wall_rows(ctx: Context, rows: List[dict]) -> None:
+    """``lipsync dub`` of 30 s (bench.dub's joined held-out sentences), as a child process."""
+    from .dub import _children_cpu, joined
+
+    held = grid.held_out()
+    video = joined(held[:10], ctx.tmp / "video-30s.mp4")
+    speech = joined(held[10:20], ctx.tmp / "speech-30s.mp4")
+    (ctx.tmp / "video-30s.txt").write_text(" ".join(grid.transcript(n) for n in held[:10]) + "\n")
+    text = " ".join(grid.transcript(n) for n in held[10:20])
+    cache = ctx.tmp / "dub-30s-cache"
+    for run, option in (("fresh cache, samples on", "on"), ("cache warm, samples on", "on"),
+                        ("cache warm, samples off", "off")):
+        cmd = [sys.executable, "-m", "lipsync", "dub", str(video), "--audio", str(speech), "--text", text,
+               "-o", str(ctx.tmp / "dub-30s.mp4"), "--quiet", "--cache", str(cache), "--samples", option]
+        c0, t0 = _children_cpu(), time.perf_counter()
+        subprocess.run(cmd, check=True, stderr=subprocess.DEVNULL)
+        wall, cpu = time.perf_counter() - t0, _children_cpu() - c0
+        rows.append({"figure": "samples", "case": f"lipsync dub of 30 s, {run}", "wall_s": round(wall, 1),
+                     "cpu_s": round(cpu, 1), "cores": os.cpu_count()})
+
+
+@FIGURES.decorator("samples")
+def samples_figures(ctx: Context, rows: List[dict]) -> None:
+    from ..banks.bank import Bank
+    from ..face.landmarks import FaceMesh
+    from .face import _upscaled
+    from .videobank import _with_sound
+
+    names = [c for c in grid.BANK_CLIPS if grid.video(c).is_file()]
+    if len(names) < len(grid.BANK_CLIPS) or len(grid.held_out()) < 20:
+        rows.append({"figure": "samples", "case": f"skipped: GRID's clips are not in {grid.grid_dir()}"})
+        return
+    names = names[:3] if ctx.quick else names
+    videos = [grid.video(c) for c in names]
+    texts = {v: grid.transcript(c) for v, c in zip(videos, names)}
+    bank_path = _make(ctx.tmp / "samples-bank", videos, texts)
+    bank = Bank.load(bank_path)
+    mesh = FaceMesh()
+    held = grid.held_out()
+    _size_rows(bank_path, rows)
+    _stage_rows(bank, rows)
+    _selection_rows(bank, rows)
+    judged = held[:TUNED_FROM]  # the selection's weights were chosen on the rest
+    _render_rows(ctx, bank, judged[:6] if ctx.quick else judged, mesh, rows)
+    pairs = list(zip(judged[0::2], judged[1::2]))[: 3 if ctx.quick else 10]
+    _dub_rows(ctx, bank, pairs, mesh, rows)
+    a, b = held[:2]
+    big = _with_sound(videos[:3], ctx.tmp)
+    bank720 = _make(ctx.tmp / "samples-bank-720p", big, {p: texts[v] for p, v in zip(big, videos)})
+    _cost_rows(ctx, {"bank 360x288": (bank_path, grid.video(a), b),
+                     "bank from 1280x720 video": (bank720, _upscaled([grid.video(a)], ctx.tmp)[0], b)}, rows)
+    _wall_rows(ctx, rows)

@@ -1,0 +1,384 @@
+"""Choosing one mouth sample per rendered frame (:func:`select_samples`).
+
+Per frame t the *target* is what the render should show: the phone said then and its
+neighbours (from the timeline), the viseme the sequencer shows, and the lip opening and
+width the dominance model predicts (:func:`lipsync.motion.coarticulation.predicted` of the
+frame schedule, each viseme valued at its samples' median). Per frame the candidates are
+the :data:`NEAREST` samples of that viseme nearest the predicted opening and width
+(OpenCV's FLANN k-d tree, exact search, one tree per viseme, built once) and the next frames of the
+:data:`FOLLOW` cheapest candidates of frame t-1 (so a run of real video can continue).
+The :class:`~lipsync.selection.viterbi.Viterbi` pass then finds the cheapest path under
+the costs of :data:`WEIGHTS`: a join between two samples that are consecutive frames of
+the source costs nothing.
+
+Silence and closures are exact: a frame the sequencer shows closed (a bilabial) takes only
+samples of that viseme whose lips are closed (opening at most :data:`CLOSED`), a frame of
+silence showing the rest shape only samples of silence with the lips at rest.
+
+Examples
+--------
+>>> WEIGHTS["join"] > 0 and WEIGHTS["phone_same"] == 0
+True
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Dict, List, Optional, Sequence
+
+import numpy as np
+
+from .viterbi import Viterbi
+
+#: The costs, one unit being a lip opening 0.033 eye distances off the prediction. Chosen
+#: on 6 held-out GRID s1 sentences (grid.held_out()[24:30], left out of the figure's
+#: sentences), bank of the 10 bank sentences: lip opening r of the chosen samples 0.71-0.73
+#: for open 30-60 against 0.66-0.70 at 10 (the prediction itself reaches 0.73: it is the
+#: cap); raising the phone-context terms lowered r (0.55-0.69).
+#:
+#: ================  =====  =========================================================
+#: term              cost   why
+#: ================  =====  =========================================================
+#: open              30     per eye distance of lip opening off the prediction
+#: width             4      per eye distance of mouth width off (rounding, spreading)
+#: phone_same        0      the sample was said as this very phone
+#: phone_viseme      0.3    another phone of the same viseme (its context differs)
+#: phone_other       1.5    another viseme's phone (a run continued across a boundary)
+#: context           0.15   each of the previous and next phones that differs
+#: position          1      per unit of how far into its phone (0-1) the sample is off
+#:                          the frame's (a run starts where its phone starts)
+#: join              0.3    any cut between two samples that are not source neighbours
+#:                          (runs of ~3 frames; 0.5 gave ~4 and r 0.72)
+#: lips              1      per mouth width of RMS lip-point distance across a cut
+#: look              1      per unit of RMS thumbnail difference (0-1 grey) across a cut
+#: ================  =====  =========================================================
+WEIGHTS = {"open": 30.0, "width": 4.0, "phone_same": 0.0, "phone_viseme": 0.3, "phone_other": 1.5,
+           "context": 0.15, "position": 1.0, "join": 0.3, "lips": 1.0, "look": 1.0}
+#: The predicted opening's excursion from rest is scaled by this: medians blended by the
+#: dominance weights undershoot the speaker's peaks. On the tuning sentences (joins cut):
+#: gain 1.0 / 1.6 / 2.2 gave the rendered opening 0.86 / 1.24 / 1.79 of the real one's
+#: standard deviation at r 0.69 / 0.72 / 0.71; 1.3 sits between (the videobank's SPAN_GAIN
+#: is 1.5 for the same reason).
+TARGET_GAIN = 1.3
+#: Candidates per frame from the viseme's tree: 24 keep the cost of a 10-minute clip's
+#: selection to seconds (K^2 joins per frame).
+NEAREST = 24
+#: Runs followed from the previous frame: its cheapest candidates' successors.
+FOLLOW = 16
+#: A sample's lips count as closed at most this inner-lip gap (eye distances): GRID s1's
+#: P/B/M frames measure a median 0.01, and 0.03 is a visibly parted lip.
+CLOSED = 0.03
+
+
+class Tree:
+    """Exact k nearest neighbours with OpenCV's FLANN single k-d tree (already a dependency;
+    ``checks=-1``: unlimited, so the search is exact, not approximate).
+
+    Examples
+    --------
+    >>> t = Tree(np.array([[0.0, 0.0], [1.0, 0.0], [5.0, 5.0]]))
+    >>> t.query([0.9, 0.1], k=2)[1].tolist()
+    [1, 0]
+    """
+
+    def __init__(self, points: np.ndarray):
+        import cv2
+
+        self._data = np.ascontiguousarray(points, np.float32)
+        self._index = cv2.flann_Index(self._data, dict(algorithm=4, leaf_max_size=10))  # KDTREE_SINGLE
+
+    def query(self, point, k: int):
+        """``(distances, indices)`` of the ``k`` points nearest ``point``, nearest first."""
+        q = np.asarray(point, np.float32).reshape(1, -1)
+        idx, dist = self._index.knnSearch(q, int(k), params=dict(checks=-1))
+        return np.sqrt(dist[0]), idx[0].astype(np.int64)
+
+
+@dataclass
+class Target:
+    """What each frame should show (arrays of one row per frame)."""
+
+    phone: np.ndarray      # str
+    prev: np.ndarray
+    next: np.ndarray
+    viseme: np.ndarray     # the viseme the sequencer shows (the nearer of from/to)
+    opening: np.ndarray    # predicted, eye distances
+    width: np.ndarray
+    closed: np.ndarray     # bool: must show closed lips
+    rest: np.ndarray       # bool: silence at rest
+    position: np.ndarray = None  # how far into its phone each frame is, 0-1
+
+
+@dataclass
+class Selection:
+    """The chosen samples and how the choice was made."""
+
+    samples: np.ndarray                 # (T,) sample index per frame
+    target: Target
+    seconds: float = 0.0
+    candidates: float = 0.0             # mean candidates per frame
+    cost: float = 0.0
+    joins: np.ndarray = field(default=None)  # bool (T,): frame t is not frame t-1's source successor
+
+    def runs(self) -> float:
+        """Mean length of the runs of consecutive source frames shown."""
+        return len(self.samples) / max(1, int(self.joins.sum()) + 1)
+
+
+def frame_phones(timeline, n: int, fps: float):
+    """Per frame, the phone at its time and its neighbours (``sil`` for silence; a viseme
+    timeline's labels stand in for phones)."""
+    from ..samples.build import phone_rows
+
+    return [np.array(x) for x in phone_rows(timeline, n, fps)]
+
+
+def positions(labels: np.ndarray, breaks: Optional[np.ndarray] = None) -> np.ndarray:
+    """How far into its stretch of one label each entry is: ``(k + 0.5) / length`` for the
+    k-th of a stretch; a stretch also ends where ``breaks`` (bool, "starts anew here") says.
+
+    Examples
+    --------
+    >>> positions(np.array(["a", "a", "b", "b", "b", "b"])).tolist()
+    [0.25, 0.75, 0.125, 0.375, 0.625, 0.875]
+    """
+    n = len(labels)
+    start = np.ones(n, bool)
+    start[1:] = labels[1:] != labels[:-1]
+    if breaks is not None:
+        start |= breaks
+    first = np.maximum.accumulate(np.where(start, np.arange(n), 0))
+    ends = np.r_[np.nonzero(start)[0][1:], n]
+    length = (ends - np.nonzero(start)[0])[np.cumsum(start) - 1]
+    return (np.arange(n) - first + 0.5) / length
+
+
+def shown(spec) -> str:
+    """The viseme a frame shows most of."""
+    return spec.from_viseme if spec.alpha < 0.5 else spec.to_viseme
+
+
+def viseme_of(labels: np.ndarray, pmap, rest: str) -> np.ndarray:
+    """The map's (first) viseme of each phone label (the rest viseme for silence and unknown labels)."""
+    out = {}
+    for lab in set(labels.tolist()):
+        got = None if lab == "sil" else pmap.targets(lab)
+        out[lab] = got[0] if got else rest
+    return np.array([out[x] for x in labels.tolist()])
+
+
+def make_target(samples, specs, timeline, fps: float, pmap, rest: str, closures: Sequence[str],
+                params=None) -> Target:
+    """The :class:`Target` of a render's frames (``specs``, the sequencer's) and phones.
+
+    The predicted lip opening and width are the dominance model's schedule *of the phones*
+    (:func:`phone_schedule`: each phone its own shape, valued at its samples' median) when
+    the timeline has phones, else of the visemes (``specs``)."""
+    from ..motion.coarticulation import predicted
+
+    n = len(specs)
+    phone, prev, nxt = frame_phones(timeline, n, fps)
+    view = np.array([shown(s) for s in specs])
+    closed = np.array([(s.from_viseme in closures and s.alpha <= 0.2) or (s.to_viseme in closures and s.alpha >= 0.8)
+                       for s in specs], bool)
+    by_phone = phone_schedule(samples, timeline, n, fps, pmap, rest, closures, params)
+    if by_phone is not None:
+        opening, width = by_phone
+        rest_open = float(np.median(samples.opening[(samples.labels == "sil") & (samples.opening <= CLOSED)])) if (
+            (samples.labels == "sil") & (samples.opening <= CLOSED)).any() else 0.0
+        opening = rest_open + TARGET_GAIN * (opening - rest_open)
+    else:
+        values = _medians(samples, viseme_of(samples.labels, pmap, rest),
+                          {s.from_viseme for s in specs} | {s.to_viseme for s in specs}, closures)
+        opening = predicted(specs, {v: x[0] for v, x in values.items()})
+        width = predicted(specs, {v: x[1] for v, x in values.items()})
+    return Target(phone=phone, prev=prev, next=nxt, viseme=view, opening=opening, width=width, closed=closed,
+                  rest=(view == rest) & (phone == "sil"), position=positions(phone))
+
+
+def _medians(samples, keys: np.ndarray, wanted, closed_keys) -> Dict[str, tuple]:
+    """``key -> (median opening, median width)`` of the samples whose ``keys`` equal it (the
+    closed ones for ``closed_keys``); every sample's median where none has it."""
+    out = {}
+    for v in wanted:
+        mine = keys == v
+        if v in closed_keys:
+            mine &= samples.opening <= CLOSED
+        pick = mine if mine.any() else slice(None)
+        out[v] = (float(np.median(samples.opening[pick])), float(np.median(samples.width[pick])))
+    return out
+
+
+def phone_schedule(samples, timeline, n: int, fps: float, pmap, rest: str, closures: Sequence[str], params=None):
+    """``(opening, width)`` per frame predicted by the dominance model run over the *phones*
+    (:func:`lipsync.motion.coarticulation.dominance_sequence`, each phone its own shape with its
+    viseme's class; silence the rest), each phone valued at its samples' median: every sound
+    its own real opening rather than its viseme's. None for a timeline of visemes."""
+    from ..motion.coarticulation import DEFAULT_PARAMS, VisemeClasses, dominance_sequence, predicted, viseme_classes
+    from ..motion.timeline import Segment, Timeline
+    from ..samples.build import SILENCE, phone_label
+
+    if getattr(timeline, "kind", "phoneme") != "phoneme" or not len(timeline):
+        return None
+    segs = [Segment(seg.start, seg.end, phone_label(seg.label)) for seg in timeline.segments]
+    segs = [seg for seg in segs if seg.label != SILENCE]
+    labels = sorted({s.label for s in segs})
+    vis = dict(zip(labels, viseme_of(np.array(labels), pmap, rest).tolist())) if labels else {}
+    vclass = viseme_classes(pmap, rest)
+    classes = VisemeClasses({p: vclass.get(v, "other") for p, v in vis.items()})
+    classes[SILENCE] = "rest"
+    shut = [p for p, v in vis.items() if v in closures]
+    specs = dominance_sequence(Timeline(tuple(segs), kind="viseme"), fps=fps, rest=SILENCE, closures=shut,
+                               classes=classes, params=params if params is not None else DEFAULT_PARAMS,
+                               duration=n / fps)[:n]
+    values = _medians(samples, samples.labels, set(labels) | {SILENCE}, set(shut) | {SILENCE})
+    for p in labels:  # a phone the footage never said: its viseme's samples
+        if not (samples.labels == p).any():
+            values[p] = _medians(samples, viseme_of(samples.labels, pmap, rest), {vis[p]}, closures)[vis[p]]
+    return predicted(specs, {k: x[0] for k, x in values.items()}), predicted(specs, {k: x[1] for k, x in values.items()})
+
+
+#: Join features kept: the principal components holding this share of their variance (the
+#: 88 lip coordinates and 192 thumbnail pixels of GRID s1's samples: 99% in ~40 of 280), so
+#: each frame's K x K distances cost a fifth.
+JOIN_VARIANCE = 0.99
+
+
+def _principal(features: np.ndarray) -> np.ndarray:
+    """``features`` in the basis of their principal components, the fewest holding
+    :data:`JOIN_VARIANCE` of the variance (distances between rows kept to that share).
+
+    Examples
+    --------
+    >>> x = np.c_[np.arange(10.0), np.zeros(10), np.arange(10.0)]
+    >>> y = _principal(x)
+    >>> y.shape, round(float(np.linalg.norm(y[3] - y[7])), 6) == round(float(np.linalg.norm(x[3] - x[7])), 6)
+    ((10, 1), True)
+    """
+    centred = features - features.mean(axis=0)
+    _, sv, vt = np.linalg.svd(centred, full_matrices=False)
+    share = np.cumsum(sv ** 2) / max(float((sv ** 2).sum()), 1e-300)
+    k = int(np.searchsorted(share, JOIN_VARIANCE)) + 1
+    return np.ascontiguousarray(centred @ vt[:k].T)
+
+
+class Selector:
+    """A bank's samples made ready for selection under one phoneme map: per viseme (and per
+    viseme's closed and rest subsets) a k-d tree (:class:`Tree`) over (opening, width) scaled by their weights,
+    and the join features. Built once per bank and map; :meth:`select` per utterance."""
+
+    def __init__(self, samples, pmap, rest: str, closures: Sequence[str] = ()):
+        self.samples, self.pmap, self.rest, self.closures = samples, pmap, rest, tuple(closures)
+        self.succ = samples.successor()
+        self.vis = viseme_of(samples.labels, pmap, rest)
+        self.labels = samples.labels
+        self.prev_labels = samples.phones[samples.prev]
+        self.next_labels = samples.phones[samples.next]
+        breaks = np.r_[True, samples.run[1:] != samples.run[:-1]]
+        self.position = positions(self.labels, breaks)
+        self.point = np.stack([samples.opening * WEIGHTS["open"], samples.width * WEIGHTS["width"]], axis=1)
+        lips = samples.lips.reshape(len(samples), -1).astype(np.float64)
+        scale = float(np.median(np.ptp(samples.lips[..., 0], axis=1))) or 1.0  # mouth width, bank pixels
+        # lips and thumbnails scaled so that a squared distance is the join's squared cost
+        feats = np.concatenate([lips * (WEIGHTS["lips"] / scale / np.sqrt(lips.shape[1] / 2)),
+                                samples.appearance.astype(np.float64) * (WEIGHTS["look"] /
+                                                                         np.sqrt(samples.appearance.shape[1]))], axis=1)
+        self.join_features = _principal(feats)
+        # labels as integer codes: the per-frame comparisons are of ints, not strings
+        self._codes: Dict[str, int] = {}
+        self.c_phone, self.c_prev, self.c_next, self.c_vis = (self.encode(x) for x in (
+            self.labels, self.prev_labels, self.next_labels, self.vis))
+        closed = samples.opening <= CLOSED
+        silent = self.labels == "sil"
+        self._pools = {}
+        for v in set(self.vis.tolist()) | {rest}:
+            for kind, mask in (("any", self.vis == v), ("closed", (self.vis == v) & closed),
+                               ("rest", (self.vis == v) & silent & closed)):
+                idx = np.nonzero(mask)[0]
+                if idx.size:
+                    self._pools[(v, kind)] = (idx, Tree(self.point[idx]))
+        everything = np.arange(len(samples))
+        self._pools[("*", "any")] = (everything, Tree(self.point))
+        closed_all = np.nonzero(closed)[0]
+        self._pools[("*", "closed")] = (closed_all, Tree(self.point[closed_all])) if closed_all.size else \
+            self._pools[("*", "any")]
+
+    def encode(self, labels: np.ndarray) -> np.ndarray:
+        """Labels as integer codes (a label first seen gets the next code)."""
+        return np.array([self._codes.setdefault(x, len(self._codes)) for x in labels.tolist()], np.int32)
+
+    def pool(self, viseme: str, kind: str):
+        """The samples a frame may take and their tree: the viseme's (closed or at rest when
+        the frame must be), else any viseme's closed ones, else all (a sound with no sample)."""
+        order = {"any": ((viseme, "any"), ("*", "any")), "closed": ((viseme, "closed"), ("*", "closed")),
+                 "rest": ((viseme, "rest"), (viseme, "closed"), ("*", "closed"))}[kind]
+        for key in order:
+            if key in self._pools:
+                return self._pools[key]
+        raise AssertionError("unreachable: the '*' pools always exist")
+
+    def allowed(self, ids: np.ndarray, kind: str) -> np.ndarray:
+        """Which of ``ids`` a frame of ``kind`` (any, closed, rest) may show."""
+        if kind == "any":
+            return np.ones(len(ids), bool)
+        ok = self.samples.opening[ids] <= CLOSED
+        return ok & (self.labels[ids] == "sil") if kind == "rest" else ok
+
+    def target_cost(self, ids: np.ndarray, tg: Target, t: int, codes=None) -> np.ndarray:
+        """The target cost of each of ``ids`` at frame ``t`` (see :data:`WEIGHTS`); ``codes``:
+        the target's phone, prev, next and viseme codes (:meth:`encode`), made once per utterance."""
+        w = WEIGHTS
+        if codes is None:
+            codes = tuple(self.encode(x) for x in (tg.phone, tg.prev, tg.next, tg.viseme))
+        phone_c, prev_c, next_c, vis_c = codes
+        d = np.abs(self.point[ids] - [tg.opening[t] * w["open"], tg.width[t] * w["width"]]).sum(axis=1)
+        phone = np.where(self.c_phone[ids] == phone_c[t], w["phone_same"],
+                         np.where(self.c_vis[ids] == vis_c[t], w["phone_viseme"], w["phone_other"]))
+        ctx = w["context"] * ((self.c_prev[ids] != prev_c[t]).astype(float) +
+                              (self.c_next[ids] != next_c[t]).astype(float))
+        where = w["position"] * np.abs(self.position[ids] - tg.position[t])
+        return d + phone + ctx + where
+
+    def join_cost(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        """``(len(a), len(b))``: the cost of showing sample ``b[j]`` after ``a[i]`` (0 when
+        ``b[j]`` is ``a[i]``'s next frame in the source)."""
+        fa, fb = self.join_features[a], self.join_features[b]
+        d2 = (fa * fa).sum(1)[:, None] + (fb * fb).sum(1)[None, :] - 2.0 * fa @ fb.T
+        cost = WEIGHTS["join"] + np.sqrt(np.maximum(d2, 0.0))
+        cost[self.succ[a][:, None] == b[None, :]] = 0.0
+        return cost
+
+    def candidates(self, tg: Target, t: int, v: Optional[Viterbi]) -> np.ndarray:
+        """Frame ``t``'s candidates: the nearest of its pool, and the successors of the
+        previous frame's cheapest candidates that the frame allows."""
+        kind = "closed" if tg.closed[t] else "rest" if tg.rest[t] else "any"
+        idx, tree = self.pool(tg.viseme[t], kind)
+        k = min(NEAREST, len(idx))
+        _, near = tree.query([tg.opening[t] * WEIGHTS["open"], tg.width[t] * WEIGHTS["width"]], k=k)
+        ids = idx[np.atleast_1d(near)]
+        if v is not None and len(v):
+            order = np.argsort(v.costs)[:FOLLOW]
+            nxt = self.succ[v.last[order]]
+            nxt = nxt[nxt >= 0]
+            ids = np.concatenate([ids, nxt[self.allowed(nxt, kind)]])
+        return np.unique(ids)
+
+    def select(self, specs, timeline, fps: float, params=None) -> Selection:
+        """One sample per frame of ``specs`` (the sequencer's schedule) for the phones of
+        ``timeline``; ``params``: the dominance model's constants (the bank's)."""
+        t0 = time.perf_counter()
+        tg = make_target(self.samples, specs, timeline, fps, self.pmap, self.rest, self.closures, params)
+        v = Viterbi()
+        count = 0
+        codes = tuple(self.encode(x) for x in (tg.phone, tg.prev, tg.next, tg.viseme))
+        for t in range(len(specs)):
+            ids = self.candidates(tg, t, v)
+            count += len(ids)
+            v.step(ids, self.target_cost(ids, tg, t, codes), None if t == 0 else self.join_cost(v.last, ids))
+        path = np.array(v.path(), np.int64)
+        joins = np.ones(len(path), bool)
+        if len(path) > 1:
+            joins[1:] = self.succ[path[:-1]] != path[1:]
+        return Selection(samples=path, target=tg, seconds=time.perf_counter() - t0,
+                         candidates=count / max(1, len(specs)), cost=v.cost if len(path) else 0.0, joins=joins)
