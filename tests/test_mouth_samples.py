@@ -168,7 +168,10 @@ def test_check_validates_the_sample_files_and_names_the_broken_one(bank, tmp_pat
 
     table = read_table(Path(bank) / "samples.npz")
     for what, change in (("'lips' is missing", lambda t: t.pop("lips")),
-                         ("not consecutive", lambda t: t["frame"].__setitem__(1, t["frame"][1] + 5))):
+                         ("not consecutive", lambda t: t["frame"].__setitem__(1, t["frame"][1] + 5)),
+                         ("'pictures' and 'picture_opening' come together", lambda t: t.pop("picture_opening")),
+                         ("'picture_opening' must be one finite number",
+                          lambda t: t["picture_opening"].__setitem__(0, np.nan))):
         b = _broken(bank, tmp_path, what.split("'")[1] if "'" in what else "runs")
         t = {k: v.copy() for k, v in table.items()}
         change(t)
@@ -222,3 +225,25 @@ def test_render_cli_samples_off_matches_the_old_path(bank, tmp_path):
     for a, b in zip(outs["off"], sorted(ref.iterdir())):
         assert np.array_equal(cv2.imread(str(a)), cv2.imread(str(b)))
     assert any(not np.array_equal(cv2.imread(str(a)), cv2.imread(str(b))) for a, b in zip(outs["on"], outs["off"]))
+
+
+def test_the_table_holds_each_pictures_opening(bank):
+    """``picture_opening`` is each bank picture's lip opening: measured again here on the
+    pictures as written (the face mesh on the PNGs, independently of the bank's making)."""
+    import cv2
+
+    from lipsync.face import measure as M
+    from lipsync.face.track import track_frames
+    from lipsync.samples import read_table
+
+    t = read_table(Path(bank) / "samples.npz")
+    names = t["pictures"].tolist()
+    assert sorted(names) == sorted(Bank.load(bank).names)
+    pictures = [cv2.cvtColor(cv2.imread(str(Path(bank) / f"{v}.png")), cv2.COLOR_BGR2RGB) for v in names]
+    tr = track_frames(pictures, fps=25.0, smooth=False)
+    assert tr.found.all()
+    again = M.lip_opening(tr.points)
+    assert np.abs(again - t["picture_opening"]).max() < 0.015, (again.round(3), t["picture_opening"].round(3))
+    # the open shapes open wider than the closed one
+    by = dict(zip(names, t["picture_opening"]))
+    assert by["D"] > 2 * by["A"]

@@ -21,7 +21,7 @@ from __future__ import annotations
 import io
 import warnings
 from pathlib import Path
-from typing import Dict, List, Tuple
+from typing import Dict, List, Optional, Tuple
 
 import cv2
 import numpy as np
@@ -156,12 +156,14 @@ def phone_rows(phones, n: int, fps: float) -> Tuple[List[str], List[str], List[s
 
 
 def write_samples(folder: Path, footage, framing, rest_mesh: np.ndarray, rest_image: np.ndarray, *,
-                  quiet: bool = True) -> str:
+                  pictures: Optional[Dict[str, np.ndarray]] = None, quiet: bool = True) -> str:
     """Write ``samples.mp4`` and ``samples.npz`` into ``folder`` and return the bank.yaml line naming them.
 
     ``framing`` is the bank pictures' (:class:`~lipsync.videobank.stabilise.Framing`),
     ``rest_mesh`` the rest picture's face mesh (bank pixels) and ``rest_image`` the picture
     (what the plate's colour is matched to: each sample's colour gain is measured against it).
+    ``pictures`` (viseme -> its picture's face mesh, bank pixels) gives the table each
+    picture's lip opening (``pictures``, ``picture_opening``).
     """
     from ..composite.face import mask_from_mesh
 
@@ -180,6 +182,12 @@ def write_samples(folder: Path, footage, framing, rest_mesh: np.ndarray, rest_im
     table = _table(footage, keys, to_bank, origins, crops, box)
     table["mask"] = np.round(mask * 255).astype(np.uint8)
     table["gain"] = colour_gains(crops, table["affine"], rest_image, rest_mesh, mask)
+    if pictures:
+        from ..face.measure import lip_opening
+
+        names = sorted(pictures)
+        table["pictures"] = np.array(names)
+        table["picture_opening"] = np.array([float(lip_opening(np.asarray(pictures[v]))) for v in names])
     buf = io.BytesIO()
     np.savez_compressed(buf, **table)
     (folder / TABLE_NAME).write_bytes(buf.getvalue())

@@ -29,6 +29,10 @@ array           shape, dtype       meaning
 ``gain``        ``(N, 3)`` float   per-channel colour gain onto the rest picture's colour
 ``mask``        ``(H, W)`` uint8   where a sample is shown, bank pixels (0-255, feathered):
                                    the lower face inside the jaw line
+``pictures``    ``(K,)`` str       optional: the bank's visemes (its one picture each) ...
+``picture_opening`` ``(K,)`` float ... and each picture's lip opening, as ``opening``: the
+                                   selection's target blends the openings the one-picture
+                                   morph would show (:mod:`lipsync.selection.select`)
 ==============  =================  ===========================================================
 
 ``samples.mp4`` has exactly N frames, all the crop size (H.264 at crf :data:`CROP_CRF`).
@@ -75,6 +79,8 @@ ARRAYS = (
     ("origin", "i", (2,)), ("affine", "f", (2, 3)), ("appearance", "f", None), ("gain", "f", (3,)),
     ("mask", "i", None),
 )
+#: Arrays a table may hold (banks made before them lack them): the pictures' openings.
+OPTIONAL = (("pictures", "U", ()), ("picture_opening", "f", ()))
 #: Arrays with one row per sample (the rest are per clip or per phone label).
 PER_SAMPLE = ("clip", "frame", "run", "opening", "width", "protrusion", "lips", "phone", "prev", "next",
               "origin", "affine", "appearance", "gain")
@@ -165,6 +171,14 @@ def _problem(t: Dict[str, np.ndarray]) -> Optional[str]:
                 f"array {name!r} has shape {a.shape}, not one value per row"
         if kind == "f" and not np.isfinite(a).all():
             return f"array {name!r} holds a value that is not a finite number"
+    if ("pictures" in t) != ("picture_opening" in t):
+        return "arrays 'pictures' and 'picture_opening' come together"
+    for name, kind, tail in OPTIONAL if "pictures" in t else ():
+        a = t[name]
+        if (kind == "U") != (a.dtype.kind == "U") or a.ndim != 1 or (kind == "f" and not np.isfinite(a).all()):
+            return f"array {name!r} must be one {'name' if kind == 'U' else 'finite number'} per picture"
+    if "pictures" in t and (len(t["pictures"]) != len(t["picture_opening"]) or (t["picture_opening"] < 0).any()):
+        return "arrays 'pictures' and 'picture_opening' must pair a name with an opening of 0 or more"
     n = len(t["frame"])
     if n == 0 or n > MAX_SAMPLES:
         return f"{n} samples (1 to {MAX_SAMPLES})"

@@ -61,6 +61,15 @@ WEIGHTS = {"open": 30.0, "width": 4.0, "phone_same": 0.0, "phone_viseme": 0.3, "
 #: standard deviation at r 0.69 / 0.72 / 0.71; 1.3 sits between (the videobank's SPAN_GAIN
 #: is 1.5 for the same reason).
 TARGET_GAIN = 1.3
+#: Share of the target opening taken from the one-picture morph's schedule (the dominance
+#: blend of the bank pictures' openings, samples.npz ``picture_opening``: the range rule of
+#: lipsync.videobank.select placed them) rather than from the phones' medians. The two err
+#: differently: the phones' medians know every sound but undershoot; the pictures follow the
+#: timing's blends at the speaker's range. Chosen on held_out()[18:30] (12 sentences), lip
+#: opening r of the chosen samples: share 0 / 0.3 / 0.5 / 0.7 / 1 gave 0.720 / 0.739 /
+#: 0.762 / 0.759 / 0.741; on held_out()[:18], never tuned on, 0.733 (share 0) -> 0.802 (0.5),
+#: the pictures' schedule alone 0.791 there.
+PICTURE_SHARE = 0.5
 #: Candidates per frame from the viseme's tree: 24 keep the cost of a 10-minute clip's
 #: selection to seconds (K^2 joins per frame).
 NEAREST = 24
@@ -174,7 +183,9 @@ def make_target(samples, specs, timeline, fps: float, pmap, rest: str, closures:
 
     The predicted lip opening and width are the dominance model's schedule *of the phones*
     (:func:`phone_schedule`: each phone its own shape, valued at its samples' median) when
-    the timeline has phones, else of the visemes (``specs``)."""
+    the timeline has phones, else of the visemes (``specs``); where the table has the
+    pictures' openings, the opening is blended with the pictures' schedule
+    (:data:`PICTURE_SHARE`)."""
     from ..motion.coarticulation import predicted
 
     n = len(specs)
@@ -188,6 +199,9 @@ def make_target(samples, specs, timeline, fps: float, pmap, rest: str, closures:
         rest_open = float(np.median(samples.opening[(samples.labels == "sil") & (samples.opening <= CLOSED)])) if (
             (samples.labels == "sil") & (samples.opening <= CLOSED)).any() else 0.0
         opening = rest_open + TARGET_GAIN * (opening - rest_open)
+        pictures = picture_openings(samples)
+        if pictures and all(s.from_viseme in pictures and s.to_viseme in pictures for s in specs):
+            opening = (1.0 - PICTURE_SHARE) * opening + PICTURE_SHARE * predicted(specs, pictures)
     else:
         values = _medians(samples, viseme_of(samples.labels, pmap, rest),
                           {s.from_viseme for s in specs} | {s.to_viseme for s in specs}, closures)
@@ -195,6 +209,22 @@ def make_target(samples, specs, timeline, fps: float, pmap, rest: str, closures:
         width = predicted(specs, {v: x[1] for v, x in values.items()})
     return Target(phone=phone, prev=prev, next=nxt, viseme=view, opening=opening, width=width, closed=closed,
                   rest=(view == rest) & (phone == "sil"), position=positions(phone))
+
+
+def picture_openings(samples) -> Dict[str, float]:
+    """``viseme -> its picture's lip opening`` from the table (empty for a table without them).
+
+    Examples
+    --------
+    >>> from types import SimpleNamespace
+    >>> picture_openings(SimpleNamespace(table={"pictures": np.array(["A", "D"]),
+    ...                                         "picture_opening": np.array([0.01, 0.2])}))
+    {'A': 0.01, 'D': 0.2}
+    """
+    t = samples.table
+    if "pictures" not in t:
+        return {}
+    return {str(v): float(x) for v, x in zip(t["pictures"].tolist(), t["picture_opening"].tolist())}
 
 
 def _medians(samples, keys: np.ndarray, wanted, closed_keys) -> Dict[str, tuple]:

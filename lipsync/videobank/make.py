@@ -521,7 +521,7 @@ def assemble(outdir: Path, footage: Footage, ranked: Dict[str, List[Candidate]],
             from ..samples.build import write_samples
 
             text_yaml += write_samples(tmp, footage, pictures.framing, pts[pmap.silence], images[files[pmap.silence]],
-                                       quiet=cfg.quiet)
+                                       pictures={v: pts[v] for v in order}, quiet=cfg.quiet)
         Bank.from_text(text_yaml, tmp, images=images)  # never write a bank that would not load
         write_bank_text(tmp / "bank.yaml", text_yaml)
         bank = Bank.load(tmp)
