@@ -2,8 +2,9 @@
 
 Per frame t the *target* is what the render should show: the phone said then and its
 neighbours (from the timeline), the viseme the sequencer shows, and the lip opening and
-width the dominance model predicts (:func:`lipsync.motion.coarticulation.predicted` of the
-frame schedule, each viseme valued at its samples' median). Per frame the candidates are
+width the dominance model predicts (:func:`lipsync.motion.coarticulation.predicted`: the
+phones' schedule, each phone valued at its samples' median, blended with the one-picture
+morph's schedule of the pictures' openings, :data:`PICTURE_SHARE`). Per frame the candidates are
 the :data:`NEAREST` samples of that viseme nearest the predicted opening and width
 (OpenCV's FLANN k-d tree, exact search, one tree per viseme, built once) and the next frames of the
 :data:`FOLLOW` cheapest candidates of frame t-1 (so a run of real video can continue).
