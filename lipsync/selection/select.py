@@ -1,4 +1,4 @@
-"""Choosing one mouth sample per rendered frame (:func:`select_samples`).
+"""Choosing one mouth sample per rendered frame (:meth:`Selector.select`).
 
 Per frame t the *target* is what the render should show: the phone said then and its
 neighbours (from the timeline), the viseme the sequencer shows, and the lip opening and
