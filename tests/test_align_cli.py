@@ -15,6 +15,7 @@ import pytest
 
 import synthetic
 from lipsync import Animator, Bank, read_timeline
+from lipsync.errors import InputError
 from lipsync.encode import probe
 from lipsync.speech.align import AlignmentWarning, MissingWordsWarning, align
 from lipsync.readers import READERS
@@ -199,9 +200,12 @@ def test_empty_transcript_means_none(tmp_path):
     empty.write_text("  \n")
     recognised = align(HELLO_WAV, None)
     assert recognised.recognised and recognised.confidence is None and len(recognised.words) >= 3
-    for text in ("", "   ", str(empty), "...!"):
+    for text in ("", "   ", str(empty)):
         al = align(HELLO_WAV, text)
         assert al.recognised and al.words == recognised.words and al.phones == recognised.phones
+    # only symbols is not "no transcript" but a wrong one (issue 38 item 13): refused, named
+    with pytest.raises(InputError, match="no words to say, only symbols or punctuation"):
+        align(HELLO_WAV, "...!")
 
 
 def test_audio_is_a_timeline_format(tmp_path):

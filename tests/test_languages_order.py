@@ -51,5 +51,5 @@ def test_the_bench_truth_does_not_depend_on_what_espeak_spoke_before():
     again, events_again = fresh_synthesis(VI, "vi")
     assert np.array_equal(first, again) and events == events_again
     # the reason for the fresh process: in one process the same sentence came out otherwise
+    # (how far apart depends on everything the process spoke before: other tests too)
     assert not np.array_equal(first, in_process)
-    assert abs(len(first) - len(in_process)) < 0.01 * SYNTH_RATE   # the same speech, a few samples apart
