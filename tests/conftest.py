@@ -33,20 +33,24 @@ def synthetic_bank_dir(tmp_path_factory):
     return synthetic.write_bank(tmp_path_factory.mktemp("synthetic") / "bank")
 
 
-#: The files that take longest (CPU seconds of one run on one core, measured with
-#: ``--durations``), heaviest first. ``make test`` runs files whole on two workers
-#: (``--dist loadfile``) and hands them out in collection order: with these first, the
-#: short files fill in around them at the end instead of one long file running alone on one
-#: core after the other worker has finished. A file missing from this list only costs time.
+#: The files that take longest, heaviest first (CPU seconds, the test process and its
+#: children, in a two-worker run of 2026-11-28). ``make test`` runs files whole on two workers
+#: (``--dist loadfile --no-loadscope-reorder``) and hands them out in collection order: with
+#: these first, the short files fill in around them at the end instead of one long file
+#: running alone on one core after the other worker has finished (that run: doc examples
+#: last, 157 s). A file missing from this list only costs time.
 HEAVY_FIRST = (
-    "test_doc_examples.py",       # builds the wheel, runs every documented example
-    "test_dub_hardening.py",      # real dubs, one SIGKILLed while it builds its bank
-    "test_dub_lang.py",           # dubs and inits in Spanish and French
-    "test_fuzz.py",               # every reader, loader and server route fuzzed
-    "test_timing_editor_browser.py",
-    "test_timing_editor_api.py",
-    "test_dub.py",
-    "test_serve_memory.py",
+    "test_doc_examples.py",       # 157 s: builds the wheel, runs every documented example
+    "test_fuzz.py",               # 59 s: every reader, loader and server route fuzzed
+    "test_dub_hardening.py",      # 55 s: real dubs, one SIGKILLed while it builds its bank
+    "test_dub_lang.py",           # 43 s: dubs and inits in Spanish and French
+    "test_plain_scripts.py",      # 43 s
+    "test_dub.py",                # 34 s
+    "test_batch.py",              # 34 s: dask clusters
+    "test_align_cli.py",          # 30 s
+    "test_crash_safety.py",       # 26 s
+    "test_align_accuracy.py",     # 24 s
+    "test_videobank.py",          # 22 s
 )
 
 
