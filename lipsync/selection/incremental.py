@@ -1,0 +1,180 @@
+"""Selection for frames that are fixed one at a time, as a live session shows them.
+
+A live session cannot wait for the end of the utterance: frame c must be shown when it
+falls due, knowing only the frames up to the end of the data (the look-ahead). For each
+frame to fix, :meth:`Incremental.fix` runs the offline selection's dynamic programme --
+the same candidates (:meth:`~lipsync.selection.select.Selector.candidates`), target cost
+(:func:`~lipsync.selection.select.make_target`, :meth:`~lipsync.selection.select.Selector.target_cost`)
+and join cost -- over the window from frame c to the end of the data, starting from the
+sample already fixed at frame c - 1 (a single candidate of cost 0: the path stays
+continuous, and a fixed frame is never retracted), and fixes the window's first frame.
+The window's path is kept (a *plan*) and its next frames are fixed from it while the data
+it was made from is unchanged (the caller's ``key``); new data makes a new plan.
+
+So when all the data is there before the first frame, the first plan is the offline
+selection over the whole utterance and every frame is fixed from it: the live path *is*
+the offline path. With a short look-ahead the plan is remade as data arrives.
+
+What each fixed frame shows (a sample as it is, or the morph across a join) is
+:func:`~lipsync.selection.plan.frame_plan` on the fixed path's last frames, as offline.
+
+Examples
+--------
+>>> import numpy as np
+>>> from types import SimpleNamespace
+>>> inc = Incremental(SimpleNamespace(succ=np.array([1, 2, -1, 4, -1])), fps=25)
+>>> inc.path, inc.exact = [0, 1, 3], [False, False, False]     # fixed: a run, then a join
+>>> [tuple(round(float(x), 2) for x in inc.shows(n)) for n in range(3)]
+[(0.0, 0.0, 1.0), (1.0, 1.0, 1.0), (2.0, 3.0, 0.5)]
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import Hashable, List, Optional, Sequence, Tuple
+
+import numpy as np
+
+from .plan import JOIN_FRAMES, frame_plan
+from .viterbi import Viterbi
+
+
+@dataclass
+class Plan:
+    """A window's chosen samples: frames ``first .. first + len(ids) - 1``, made from data ``key``."""
+
+    first: int
+    ids: np.ndarray
+    exact: np.ndarray      # bool: closed or at rest (never morphed)
+    key: Hashable
+
+    def covers(self, n: int) -> bool:
+        return self.first <= n < self.first + len(self.ids)
+
+
+class _Memo:
+    """An object seen through a proxy that remembers ``methods``' results per argument and
+    ``attributes``' values: the target is made for every window from the same bank and map,
+    and these answer the same every time (a phone's viseme, the samples' labels)."""
+
+    def __init__(self, obj, methods=(), attributes=()):
+        self._obj = obj
+        for name in methods:
+            setattr(self, name, self._remember(getattr(obj, name)))
+        for name in attributes:
+            setattr(self, name, getattr(obj, name))
+
+    @staticmethod
+    def _remember(fn):
+        seen: dict = {}
+
+        def call(*args, **kwargs):
+            key = (args, tuple(sorted(kwargs.items())))
+            if key not in seen:
+                seen[key] = fn(*args, **kwargs)
+            return seen[key]
+        return call
+
+    def __getattr__(self, name):
+        return getattr(self._obj, name)
+
+
+class Incremental:
+    """The selection of one live stream, fixed frame by frame (see the module docstring).
+
+    Parameters
+    ----------
+    selector : lipsync.selection.Selector
+        The bank's samples made ready (built once per bank and map, shared by streams).
+    fps : float
+    params : DominanceParams, optional
+        The dominance model's constants (the predicted opening's), as offline.
+
+    Attributes
+    ----------
+    path : list of int
+        The sample fixed for each frame so far.
+    exact : list of bool
+        Whether each fixed frame must be shown exactly (closed lips, rest).
+    windows : int
+        Plans made (dynamic programmes run).
+    seconds : float
+        Time spent making them.
+    """
+
+    def __init__(self, selector, fps: float, params=None):
+        self.selector, self.fps, self.params = selector, float(fps), params
+        self.path: List[int] = []
+        self.exact: List[bool] = []
+        self.plan: Optional[Plan] = None
+        self.windows = 0
+        self.seconds = 0.0
+        self.window_frames = 0
+        # the same values as the selector's, looked up once (each window's target reads them)
+        self._samples = _Memo(selector.samples, attributes=("labels",))
+        self._pmap = _Memo(selector.pmap, methods=("targets",))
+
+    def __len__(self) -> int:
+        return len(self.path)
+
+    def fix(self, specs: Sequence, timeline, base: int, key: Hashable) -> int:
+        """Fix the next frame, ``c = len(self)``, and return its sample.
+
+        Parameters
+        ----------
+        specs : sequence of FrameSpec
+            The sequencer's frames ``base .. E`` (``base <= c <= E``): what the data says
+            up to the end of the window.
+        timeline : Timeline
+            The phones (or visemes), timed so that 0 is frame ``base``'s time.
+        base : int
+            The first frame of ``specs`` (frames before ``c`` only give the target its
+            context: the phones' dominance reaches back).
+        key : hashable
+            What the data is: while it is the same and the plan covers frame c, the plan's
+            frame is fixed without a new programme.
+        """
+        c = len(self.path)
+        if not (base <= c < base + len(specs)):
+            raise ValueError(f"frame {c} is not in the window {base}..{base + len(specs) - 1}")
+        if self.plan is None or self.plan.key != key or not self.plan.covers(c):
+            self.plan = self._window(specs, timeline, base, key)
+        k = c - self.plan.first
+        self.path.append(int(self.plan.ids[k]))
+        self.exact.append(bool(self.plan.exact[k]))
+        return self.path[-1]
+
+    def _window(self, specs, timeline, base: int, key) -> Plan:
+        """The cheapest path over frames ``c .. base + len(specs) - 1`` from the fixed frame ``c - 1``."""
+        from .select import make_target
+
+        t0 = time.perf_counter()
+        sel = self.selector
+        c = len(self.path)
+        tg = make_target(self._samples, specs, timeline, self.fps, self._pmap, sel.rest, sel.closures, self.params)
+        codes = tuple(sel.encode(x) for x in (tg.phone, tg.prev, tg.next, tg.viseme))
+        v = Viterbi()
+        if c > 0:   # the start constraint: the sample already shown
+            v.step(np.array([self.path[-1]], np.int64), np.zeros(1))
+        for t in range(c - base, len(specs)):
+            ids = sel.candidates(tg, t, v)
+            v.step(ids, sel.target_cost(ids, tg, t, codes), None if len(v) == 0 else sel.join_cost(v.last, ids))
+        ids = np.array(v.path()[1 if c > 0 else 0:], np.int64)
+        exact = (tg.closed | tg.rest)[c - base:]
+        self.windows += 1
+        self.window_frames += len(ids)
+        self.seconds += time.perf_counter() - t0
+        return Plan(first=c, ids=ids, exact=exact, key=key)
+
+    def shows(self, n: int, join_frames: Optional[int] = None) -> Tuple[int, int, float]:
+        """``(src, dst, alpha)`` of fixed frame ``n``: the sample as it is, or the morph
+        across a join (:func:`~lipsync.selection.plan.frame_plan` over the frames that can
+        reach it, so exactly as offline for the same path)."""
+        join_frames = JOIN_FRAMES if join_frames is None else join_frames
+        if not 0 <= n < len(self.path):
+            raise IndexError(f"frame {n} is not fixed (0..{len(self.path) - 1})")
+        lo = max(0, n - join_frames)
+        src, dst, alpha = frame_plan(np.array(self.path[lo:n + 1], np.int64), self.selector.succ,
+                                     np.array(self.exact[lo:n + 1], bool), join_frames)
+        return int(src[-1]), int(dst[-1]), float(alpha[-1])
