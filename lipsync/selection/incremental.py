@@ -22,7 +22,9 @@ Examples
 --------
 >>> import numpy as np
 >>> from types import SimpleNamespace
->>> inc = Incremental(SimpleNamespace(succ=np.array([1, 2, -1, 4, -1])), fps=25)
+>>> selector = SimpleNamespace(succ=np.array([1, 2, -1, 4, -1]), samples=SimpleNamespace(labels=None),
+...                            pmap=SimpleNamespace(targets=None))
+>>> inc = Incremental(selector, fps=25)
 >>> inc.path, inc.exact = [0, 1, 3], [False, False, False]     # fixed: a run, then a join
 >>> [tuple(round(float(x), 2) for x in inc.shows(n)) for n in range(3)]
 [(0.0, 0.0, 1.0), (1.0, 1.0, 1.0), (2.0, 3.0, 0.5)]
