@@ -240,3 +240,21 @@ def test_a_serve_audio_session_on_a_sample_bank_sends_sample_frames(bank):
     near_on = np.mean([np.abs(got[n].astype(int) - on[n]).max(axis=2)[mouth].mean() for n in got])
     near_off = np.mean([np.abs(got[n].astype(int) - off[n]).max(axis=2)[mouth].mean() for n in got])
     assert near_off > 2 * near_on, (near_on, near_off)
+
+
+def test_a_frame_far_past_the_data_is_rest_and_fixes_no_frames_on_the_way(bank, sentence):
+    from lipsync.selection.select import CLOSED
+
+    tl, _ = sentence
+    live = LiveAnimator(bank, fps=25, prepare=False)
+    live.push(tl)
+    assert live.frame(10).shape == (222, 240, 3)
+    live.frame_at(1e308)                        # a clock at "infinity": rest, at once
+    sel = live.samples.selection
+    assert sel.first > 2_000_000 and len(sel.path) == 1 and sel.windows <= 2
+    k = live.sample(sel.first)
+    s = live.samples.shared.samples
+    assert s.opening[k] <= CLOSED and s.labels[k] == "sil"
+    # a frame skipped over shows the morph's rest (it was never shown with a sample)
+    old = Animator(bank, tl, fps=25, samples="off", plate_start=0.0)
+    assert np.array_equal(live.frame(74), old.frame(74))

@@ -65,6 +65,11 @@ EVENTS_AT = ("start", "end")
 #: run to 300 ms (the MFA recording's longest phone, pauses aside, is 280 ms).
 LONGEST_EVENT_S = 0.3
 
+#: A session with samples asked for a frame this many frames past the last one fixed, when
+#: they lie past the data (rest), starts its path there instead of fixing each (a clock run
+#: on for minutes with nothing pushed would otherwise fix thousands of frames at once).
+_JUMP_FRAMES = 50
+
 #: Longest single event accepted: a phone or word longer than a minute is a wrong time
 #: (milliseconds sent as seconds), not speech, and would plan thousands of frames at once.
 MAX_EVENT_S = 60.0
@@ -597,6 +602,7 @@ class LiveAnimator:
         if flush:
             keep, new_f = runs, max(fe.frames, self._committed_f)
         segs = self._phone_segments(keep, self._committed_f)
+        self._add_phones([(a * FRAME_S, b * FRAME_S, p) for a, b, p in keep], PHONEME)   # the samples' targets
         cut = new_f * FRAME_S
         if flush and self._events:
             cut = max(cut, self._events[-1][1])
@@ -669,15 +675,22 @@ class LiveAnimator:
         the newest fixed one (its sample is fixed when its audio comes)."""
         n = max(int(n), 0)
         with self._state:
+            sel = self.samples.selection
             if self._fe is not None:
-                if n >= len(self.samples):
-                    n = len(self.samples) - 1
-                    if n < 0:   # nothing heard yet: the viseme morph's rest
-                        return -1, -1
-                return self.samples.selection.path[n], n
-            while len(self.samples) <= n:
+                if n >= len(sel):
+                    n = len(sel) - 1
+                if n < sel.first:   # nothing heard yet: the viseme morph's rest
+                    return -1, -1
+                return sel.sample(n), n
+            if n < sel.first:       # skipped by a jump (below): never shown with a sample
+                return -1, -1
+            if n - len(sel) > _JUMP_FRAMES and len(sel) / self.fps >= self._seq.horizon + self._seq._relax_s:
+                # far past the data (a clock that ran on with nothing pushed): the frames
+                # between are rest; fix from here rather than every frame on the way
+                sel.restart(n)
+            while len(sel) <= n:
                 self._fix_sample_pushed()
-            return self.samples.selection.path[n], n
+            return sel.sample(n), n
 
     def _fix_sample_pushed(self) -> None:
         """Pushed events: fix the next frame's sample from a window up to the end of the data."""

@@ -110,6 +110,8 @@ class Incremental:
 
     def __init__(self, selector, fps: float, params=None):
         self.selector, self.fps, self.params = selector, float(fps), params
+        #: The frame ``path[0]`` is fixed for (0 unless :meth:`restart` moved it on).
+        self.first = 0
         self.path: List[int] = []
         self.exact: List[bool] = []
         self.plan: Optional[Plan] = None
@@ -121,7 +123,19 @@ class Incremental:
         self._pmap = _Memo(selector.pmap, methods=("targets",))
 
     def __len__(self) -> int:
-        return len(self.path)
+        """The next frame to fix (every frame before it from :attr:`first` on is fixed)."""
+        return self.first + len(self.path)
+
+    def restart(self, frame: int) -> None:
+        """Fix frames from ``frame`` on, afresh (a stream that jumped ahead: the frames
+        skipped were never shown with a sample)."""
+        self.first, self.path, self.exact, self.plan = int(frame), [], [], None
+
+    def sample(self, n: int) -> int:
+        """The sample fixed for frame ``n``."""
+        if not self.first <= n < len(self):
+            raise IndexError(f"frame {n} is not fixed ({self.first}..{len(self) - 1})")
+        return self.path[n - self.first]
 
     def fix(self, specs: Sequence, timeline, base: int, key: Hashable) -> int:
         """Fix the next frame, ``c = len(self)``, and return its sample.
@@ -140,7 +154,7 @@ class Incremental:
             What the data is: while it is the same and the plan covers frame c, the plan's
             frame is fixed without a new programme.
         """
-        c = len(self.path)
+        c = len(self)
         if not (base <= c < base + len(specs)):
             raise ValueError(f"frame {c} is not in the window {base}..{base + len(specs) - 1}")
         if self.plan is None or self.plan.key != key or not self.plan.covers(c):
@@ -156,16 +170,16 @@ class Incremental:
 
         t0 = self.clock()
         sel = self.selector
-        c = len(self.path)
+        c = len(self)
         tg = make_target(self._samples, specs, timeline, self.fps, self._pmap, sel.rest, sel.closures, self.params)
         codes = tuple(sel.encode(x) for x in (tg.phone, tg.prev, tg.next, tg.viseme))
         v = Viterbi()
-        if c > 0:   # the start constraint: the sample already shown
+        if self.path:   # the start constraint: the sample already shown
             v.step(np.array([self.path[-1]], np.int64), np.zeros(1))
         for t in range(c - base, len(specs)):
             ids = sel.candidates(tg, t, v)
             v.step(ids, sel.target_cost(ids, tg, t, codes), None if len(v) == 0 else sel.join_cost(v.last, ids))
-        ids = np.array(v.path()[1 if c > 0 else 0:], np.int64)
+        ids = np.array(v.path()[1 if self.path else 0:], np.int64)
         exact = (tg.closed | tg.rest)[c - base:]
         self.windows += 1
         self.window_frames += len(ids)
@@ -177,9 +191,9 @@ class Incremental:
         across a join (:func:`~lipsync.selection.plan.frame_plan` over the frames that can
         reach it, so exactly as offline for the same path)."""
         join_frames = JOIN_FRAMES if join_frames is None else join_frames
-        if not 0 <= n < len(self.path):
-            raise IndexError(f"frame {n} is not fixed (0..{len(self.path) - 1})")
-        lo = max(0, n - join_frames)
-        src, dst, alpha = frame_plan(np.array(self.path[lo:n + 1], np.int64), self.selector.succ,
-                                     np.array(self.exact[lo:n + 1], bool), join_frames)
+        if not self.first <= n < len(self):
+            raise IndexError(f"frame {n} is not fixed ({self.first}..{len(self) - 1})")
+        lo, hi = max(0, n - self.first - join_frames), n - self.first + 1
+        src, dst, alpha = frame_plan(np.array(self.path[lo:hi], np.int64), self.selector.succ,
+                                     np.array(self.exact[lo:hi], bool), join_frames)
         return int(src[-1]), int(dst[-1]), float(alpha[-1])
