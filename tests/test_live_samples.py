@@ -249,12 +249,36 @@ def test_a_frame_far_past_the_data_is_rest_and_fixes_no_frames_on_the_way(bank, 
     live = LiveAnimator(bank, fps=25, prepare=False)
     live.push(tl)
     assert live.frame(10).shape == (222, 240, 3)
-    live.frame_at(1e308)                        # a clock at "infinity": rest, at once
+    live.frame_at(120.0)                        # a clock two minutes on: rest, at once
     sel = live.samples.selection
-    assert sel.first > 2_000_000 and len(sel.path) == 1 and sel.windows <= 2
+    assert sel.first == 3000 and len(sel.path) == 1 and sel.windows < 20
     k = live.sample(sel.first)
     s = live.samples.shared.samples
     assert s.opening[k] <= CLOSED and s.labels[k] == "sil"
     # a frame skipped over shows the morph's rest (it was never shown with a sample)
     old = Animator(bank, tl, fps=25, samples="off", plate_start=0.0)
     assert np.array_equal(live.frame(74), old.frame(74))
+
+
+def test_dropping_phones_no_window_reaches_changes_no_sample(bank, sentence, monkeypatch):
+    """A long session keeps only the phones its windows still reach: three sentences pushed
+    phone by phone, frames taken 120 ms behind, fix the same samples whether old phones are
+    dropped every few pushes or never."""
+    import lipsync.live.animator as A
+
+    tl, _ = sentence
+    segs = [(float(s.start) + 3.0 * k, float(s.end) + 3.0 * k, str(s.label)) for k in range(3) for s in tl.segments]
+    paths = []
+    for keep in (4, 10 ** 9):
+        monkeypatch.setattr(A, "_KEEP_PHONES", keep)
+        live = LiveAnimator(bank, fps=25, prepare=False)
+        n = 0
+        for a, b, lab in segs:
+            live.push(a, b, lab, kind="phoneme")
+            while n / 25 + 0.12 <= b + 1e-9:
+                live.sample(n)
+                n += 1
+        paths.append(live.samples.selection.path[:n])
+        if keep == 4:
+            assert len(live._phones) < len(segs) / 2        # old phones were dropped
+    assert n > 150 and paths[0] == paths[1]

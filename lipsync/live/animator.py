@@ -70,6 +70,9 @@ LONGEST_EVENT_S = 0.3
 #: on for minutes with nothing pushed would otherwise fix thousands of frames at once).
 _JUMP_FRAMES = 50
 
+#: Phones a session with samples keeps before dropping those its windows no longer reach.
+_KEEP_PHONES = 256
+
 #: Longest single event accepted: a phone or word longer than a minute is a wrong time
 #: (milliseconds sent as seconds), not speech, and would plan thousands of frames at once.
 MAX_EVENT_S = 60.0
@@ -190,6 +193,7 @@ class LiveAnimator:
         self.samples = self._attach_samples(samples)
         self._phones: List[Tuple[float, float, str]] = []   # the phones pushed (the samples' targets)
         self._phone_kind = VISEME       # PHONEME once a phone was pushed
+        self._phones_kept = 0           # phones left by the last pruning (_add_phones)
         self._version = 0               # bumped when the data a sample window sees changes
         self._mouth = threading.local()   # each render thread its own morphed frame
         self._state = threading.Lock()   # the track and its plan (the pool guards the renderers)
@@ -269,6 +273,15 @@ class LiveAnimator:
             self._phone_kind = PHONEME
         last = self._phones[-1][1] if self._phones else 0.0
         self._phones.extend((max(float(a), last), float(b), lab) for a, b, lab in phones if b > last)
+        # (amortised: a long list pushed ahead of the frames is scanned rarely)
+        if len(self._phones) > 2 * self._phones_kept + _KEEP_PHONES:
+            # a window reaches back CONTEXT_S before the next frame to fix: older phones are
+            # never read again (each window's cost stays independent of the session's length)
+            from .samples import CONTEXT_S
+
+            cut = len(self.samples) / self.fps - 2 * CONTEXT_S
+            self._phones = [p for p in self._phones if p[1] > cut]
+            self._phones_kept = len(self._phones)
 
     def resolve(self, start, end, label: str, *, kind: Optional[str] = None, offset: float = 0.0
                 ) -> List[Tuple[float, float, str]]:
@@ -684,9 +697,13 @@ class LiveAnimator:
                 return sel.sample(n), n
             if n < sel.first:       # skipped by a jump (below): never shown with a sample
                 return -1, -1
-            if n - len(sel) > _JUMP_FRAMES and len(sel) / self.fps >= self._seq.horizon + self._seq._relax_s:
+            rest_from = frame_count(self._seq.horizon + self._seq._relax_s, self.fps)
+            if n - max(len(sel), rest_from) > _JUMP_FRAMES:
                 # far past the data (a clock that ran on with nothing pushed): the frames
-                # between are rest; fix from here rather than every frame on the way
+                # from rest_from on are rest; fix those with data, then go on from frame n
+                # rather than fixing every frame on the way
+                while len(sel) < rest_from:
+                    self._fix_sample_pushed()
                 sel.restart(n)
             while len(sel) <= n:
                 self._fix_sample_pushed()
