@@ -39,7 +39,7 @@ import sys
 import time
 import warnings
 from pathlib import Path
-from typing import Dict, List
+from typing import Dict, List, Optional, Tuple
 
 import numpy as np
 
@@ -47,7 +47,14 @@ from . import FIGURES, Context
 from . import grid
 
 #: The renderings compared, in the order printed.
-METHODS = ("samples", "samples, joins cut", "old morph", "hard cuts")
+METHODS = ("samples, joins morphed", "samples, joins cut", "old morph", "hard cuts")
+#: lipsync.selection.plan.JOIN_FRAMES of the sample methods (each set explicitly, whatever the default).
+JOINS = {"samples, joins morphed": 1, "samples, joins cut": 0}
+#: :func:`inner_box`'s margins (eye distances: side, up, down) around the outer lips. The
+#: mouth box (lipsync.face.compare.mouth_box: 0.25, 0.2, 0.45) reaches the samples' mask edge
+#: (GRID s1: 38% of its pixels within 2 px of the feather, where plate and sample meet); these
+#: stay inside the mask's solid part, so the seam is not counted as sharpness.
+INNER_MARGIN = (0.1, 0.1, 0.15)
 #: Held-out sentences from this index on tuned the selection (lipsync.selection.select.WEIGHTS,
 #: TARGET_GAIN, lipsync.selection.plan.JOIN_FRAMES on [24:30]; PICTURE_SHARE on [18:30]): the
 #: figure judges on the ones before.
@@ -76,20 +83,18 @@ def _encoded(frames, tmp: Path, fps: float) -> List[np.ndarray]:
     return out
 
 
-def _frames(bank, clip: str, method: str) -> tuple:
-    """Clip's frames rendered by ``method``, and the Animator (its specs and selection)."""
+def render_method(bank, timeline, fps: float, method: str, n: Optional[int] = None) -> tuple:
+    """``timeline`` rendered by ``method`` (one of :data:`METHODS`) onto ``bank``'s plate: the
+    frames (before encoding, at most ``n``) and the Animator (its specs and sample path)."""
     from ..pipeline.animator import Animator
-
     from ..selection import plan
 
-    fps = grid.track(clip).fps
-    keep, plan.JOIN_FRAMES = plan.JOIN_FRAMES, 0 if method == "samples, joins cut" else plan.JOIN_FRAMES
+    keep, plan.JOIN_FRAMES = plan.JOIN_FRAMES, JOINS.get(method, plan.JOIN_FRAMES)
     try:
-        anim = Animator(bank, grid.alignment_of(clip).phones, fps=fps,
-                        samples="on" if method.startswith("samples") else "off")
+        anim = Animator(bank, timeline, fps=fps, samples="on" if method.startswith("samples") else "off")
     finally:
         plan.JOIN_FRAMES = keep
-    n = min(len(anim), len(grid.track(clip)))
+    n = len(anim) if n is None else min(n, len(anim))
     if method == "hard cuts":
         out = []
         for i in range(n):
@@ -100,6 +105,89 @@ def _frames(bank, clip: str, method: str) -> tuple:
             out.append(anim.plate.compositor.apply_prepared(mouth, buf, anim.plate._prepared[j]))
         return out, anim
     return [anim.frame(i).copy() for i in range(n)], anim
+
+
+def _frames(bank, clip: str, method: str) -> tuple:
+    """GRID ``clip``'s frames rendered by ``method`` from its alignment, and the Animator."""
+    return render_method(bank, grid.alignment_of(clip).phones, grid.track(clip).fps, method, len(grid.track(clip)))
+
+
+def inner_box(points: np.ndarray, shape) -> Tuple[int, int, int, int]:
+    """``(x0, y0, x1, y1)``: the outer lips' box widened by :data:`INNER_MARGIN` eye distances
+    (side, up, down), inside ``shape``: the mouth without the samples' mask edge.
+
+    Examples
+    --------
+    >>> x0, y0, x1, y1 = inner_box(np.tile([[50.0, 50.0]], (478, 1)), (100, 100))
+    >>> (x0, y0) == (50, 50) and x1 == y1 == 51            # no eye distance: the lips' own box
+    True
+    """
+    from ..face import topology as T
+    from ..face.compare import eye_centres
+
+    p = np.asarray(points, np.float64)[:, :2]
+    lips = p[list(T.LIP_OUTER_UPPER + T.LIP_OUTER_LOWER)]
+    a, b = eye_centres(p)
+    d = float(np.linalg.norm(b - a))
+    side, up, down = INNER_MARGIN
+    h, w = shape[:2]
+    x0, x1 = int(np.floor(lips[:, 0].min() - side * d)), int(np.ceil(lips[:, 0].max() + side * d)) + 1
+    y0, y1 = int(np.floor(lips[:, 1].min() - up * d)), int(np.ceil(lips[:, 1].max() + down * d)) + 1
+    return max(0, x0), max(0, y0), min(w, x1), min(h, y1)
+
+
+def lip_sharpness(frames, points) -> np.ndarray:
+    """Per frame: variance of the Laplacian of the luma in :func:`inner_box` (NaN without a
+    face): :func:`lipsync.bench.videobank.mouth_sharpness` without the mask's edge."""
+    from ..videobank.select import sharpness
+
+    out = np.full(len(frames), np.nan)
+    for i, (f, p) in enumerate(zip(frames, points)):
+        if np.all(np.isfinite(p)):
+            out[i] = sharpness(f[..., :3], inner_box(p, f.shape[:2]))
+    return out
+
+
+def box_steps(frames, points) -> np.ndarray:
+    """Per frame t: the mean absolute grey change of the mouth box
+    (:func:`lipsync.face.compare.mouth_box` of frame t) from frame t-1 (NaN at 0 or without a face).
+
+    Examples
+    --------
+    >>> from lipsync.face.compare import mouth_box
+    >>> frames = [np.full((60, 60, 3), v, np.uint8) for v in (10, 10, 40)]
+    >>> pts = np.tile([[30.0, 30.0]], (3, 478, 1)); pts[:, :, 0] += np.arange(478) % 3  # a non-empty box
+    >>> box_steps(frames, pts).round(1).tolist()
+    [nan, 0.0, 30.0]
+    """
+    import cv2
+
+    from ..face.compare import mouth_box
+
+    out = np.full(len(frames), np.nan)
+    for t in range(1, len(frames)):
+        p = points[t]
+        if not (np.all(np.isfinite(p)) and np.all(np.isfinite(points[t - 1]))):
+            continue
+        x0, y0, x1, y1 = mouth_box(p, frames[t].shape[:2])
+        a = cv2.cvtColor(np.ascontiguousarray(frames[t - 1][y0:y1, x0:x1, :3]), cv2.COLOR_RGB2GRAY)
+        b = cv2.cvtColor(np.ascontiguousarray(frames[t][y0:y1, x0:x1, :3]), cv2.COLOR_RGB2GRAY)
+        out[t] = float(np.abs(a.astype(np.float32) - b).mean()) if a.size else np.nan
+    return out
+
+
+def join_steps(steps: np.ndarray, joins: np.ndarray) -> np.ndarray:
+    """Per join at frame t (a new run starts): the larger of the box steps into t and t+1 (a
+    cut changes at t, a one-frame morph splits the change over t and t+1).
+
+    Examples
+    --------
+    >>> join_steps(np.array([np.nan, 1, 9, 1, 4, 4]), np.array([0, 0, 1, 0, 1, 0], bool)).tolist()
+    [9.0, 4.0]
+    """
+    n = len(steps)
+    return np.array([np.nanmax(steps[t:min(t + 2, n)]) if np.isfinite(steps[t:min(t + 2, n)]).any() else np.nan
+                     for t in np.nonzero(joins[:n])[0]])
 
 
 def crop_features(frame: np.ndarray, points: np.ndarray) -> np.ndarray:
