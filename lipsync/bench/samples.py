@@ -256,9 +256,11 @@ def auc(scores: np.ndarray, y: np.ndarray) -> float:
     return float((ranks[pos].sum() - n1 * (n1 + 1) / 2) / max(1, n1 * n0))
 
 
-def _measure(frames, anim, fps: float, mesh, real_open: np.ndarray, closures) -> Dict[str, object]:
+def _measure(frames, anim, fps: float, mesh, real_open: np.ndarray, closures, joins=None) -> Dict[str, object]:
     """What a figure reads off decoded frames: the opening and its r with the real one, mouth
-    sharpness, the opening on the closure frames, the pops, the detector's features."""
+    sharpness (the box's and the lips' own, :func:`lip_sharpness`), the opening on the
+    closure frames, the pops, the mouth box's steps (all frames, and at ``joins``: frames
+    where a new run of samples starts), the detector's features."""
     from ..face import measure as M
     from ..face.track import track_frames
     from ..selection.select import CLOSED
@@ -272,11 +274,14 @@ def _measure(frames, anim, fps: float, mesh, real_open: np.ndarray, closures) ->
             "sharp": mouth_sharpness(frames, tr.points), "closed": opening[shut] <= CLOSED,
             "pops": grid.above_nose_pops(frames, tr.points) if tr.found.any() else np.nan,
             "features": [crop_features(f, p) for f, p, ok in zip(frames, tr.points, tr.found) if ok],
+            "lip_sharp": lip_sharpness(frames, tr.points), "steps": (steps := box_steps(frames, tr.points)),
+            "join_steps": join_steps(steps, np.asarray(joins, bool)[:n]) if joins is not None else np.array([]),
             "points": tr.points}
 
 
 def _render_rows(ctx: Context, bank, clips: List[str], mesh, rows: List[dict]) -> None:
-    """The held-out sentences rendered three ways (and the real frames), one row each."""
+    """The held-out sentences rendered each way of :data:`METHODS` (and the real frames), one
+    row each; then the lips' sharpness per stage (:func:`_stage_sharpness_row`)."""
     from ..face.video import read_video
     from ..phonetics.phonemes import DEFAULT_MAP, load_map
     from .videobank import mouth_sharpness
@@ -284,6 +289,7 @@ def _render_rows(ctx: Context, bank, clips: List[str], mesh, rows: List[dict]) -
     closures = set(load_map(DEFAULT_MAP).closures)
     got: Dict[str, Dict[str, list]] = {m: {} for m in ("real",) + METHODS}
     raw_sharp: Dict[str, list] = {m: [] for m in METHODS}
+    stages: Dict[str, list] = {"plate under the render": [], "real, not re-encoded": []}
     for clip in clips:
         rt = grid.track(clip)
         real_open = grid.real_measures(clip)["opening"]
@@ -292,18 +298,54 @@ def _render_rows(ctx: Context, bank, clips: List[str], mesh, rows: List[dict]) -
         for m in METHODS:
             frames, anim = _frames(bank, clip, m)
             dec = _encoded(frames, ctx.tmp, rt.fps)
-            got_m = _measure(dec, anim, rt.fps, mesh, real_open, closures)
-            raw_sharp[m].append(np.nanmedian(mouth_sharpness(frames, got_m.pop("points"))))
+            sp = anim.sample_path
+            got_m = _measure(dec, anim, rt.fps, mesh, real_open, closures,
+                             None if sp is None else sp.selection.joins)
+            pts = got_m.pop("points")
+            raw_sharp[m].append(np.nanmedian(mouth_sharpness(frames, pts)))
+            stages.setdefault(f"{m}, before encoding", []).append(lip_sharpness(frames, pts))
+            if m == METHODS[0]:
+                plate = [anim.plate.frames[anim.plate.index(i, rt.fps, anim.plate_line)] for i in range(len(frames))]
+                stages["plate under the render"].append(lip_sharpness(plate, pts))
             for k, v in got_m.items():
                 got[m].setdefault(k, []).append(v)
             got[m].setdefault("clip", []).append([clip] * len(got_m["features"]))
         real_m = _measure(_encoded(real, ctx.tmp, rt.fps), anim, rt.fps, mesh, real_open, closures)
         real_m.pop("points")
         real_m["raw_sharp"] = np.nanmedian(mouth_sharpness(real, rt.points))
+        stages["real, not re-encoded"].append(lip_sharpness(real, rt.points))
         for k, v in real_m.items():
             got["real"].setdefault(k, []).append(v)
         got["real"].setdefault("clip", []).append([clip] * len(real_m["features"]))
     _quality_rows("render", got, raw_sharp, "real", rows, len(clips))
+    _stage_sharpness_row(bank, got, stages, rows)
+
+
+def _stage_sharpness_row(bank, got, stages: Dict[str, list], rows: List[dict]) -> None:
+    """The lips' sharpness (:func:`lip_sharpness`: no mask edge) of a render per stage, over
+    the held-out real frames re-encoded: the bank's footage (the samples' and the plate's
+    source frames, as decoded), the plate under the render, each method before and after
+    encoding. GRID's sentences differ among themselves (a sentence's median from 0.5x to
+    1.2x the median of all), so a render is as sharp as the footage it was made from."""
+    from ..face.video import read_video
+    from ..pipeline.samplepath import bank_samples
+
+    ref = float(np.nanmedian(np.concatenate(got["real"]["lip_sharp"])))
+    footage = []
+    for c in [Path(str(v)).stem for v in bank_samples(bank, "on").clips]:
+        if grid.video(c).is_file():
+            footage.append(lip_sharpness([np.array(f) for f in read_video(grid.video(c))], grid.track(c).points))
+    row = {"figure": "samples", "case": "render: the lips' sharpness per stage (over held-out real frames, re-encoded)",
+           "bank_footage": round(float(np.nanmedian(np.concatenate(footage))) / ref, 3) if footage else None}
+    for k, v in stages.items():
+        row[k.replace(", ", " ").replace(" ", "_")] = round(float(np.nanmedian(np.concatenate(v))) / ref, 3)
+    for m in METHODS:
+        row[f"{m} encoded".replace(", ", " ").replace(" ", "_")] = round(
+            float(np.nanmedian(np.concatenate(got[m]["lip_sharp"]))) / ref, 3)
+    per_clip = [float(np.nanmedian(v)) / float(np.nanmedian(np.concatenate(stages["real, not re-encoded"])))
+                for v in stages["real, not re-encoded"]]
+    row["held_out_sentences_spread"] = f"{min(per_clip):.2f}-{max(per_clip):.2f}"
+    rows.append(row)
 
 
 def _quality_rows(what: str, got, raw_sharp, reference: str, rows: List[dict], count: int) -> None:
@@ -311,6 +353,8 @@ def _quality_rows(what: str, got, raw_sharp, reference: str, rows: List[dict], c
     ref = got[reference]
     ref_sharp = float(np.nanmedian(np.concatenate(ref["sharp"])))
     ref_pops = float(np.nanmean(ref["pops"]))
+    ref_lips = float(np.nanmedian(np.concatenate(ref["lip_sharp"])))
+    ref_step = float(np.nanpercentile(np.concatenate(ref["steps"]), 99))
     real_feats = np.array([f for fs in ref["features"] for f in fs])
     real_groups = np.array([c for cs in ref["clip"] for c in cs])
     ref_open = np.concatenate(got[reference].get("real_open", ref["open"]))
@@ -325,20 +369,27 @@ def _quality_rows(what: str, got, raw_sharp, reference: str, rows: List[dict], c
         ok = np.isfinite(opening) & np.isfinite(real_open)
         closed = np.concatenate(g["closed"])
         sharp = float(np.nanmedian(np.concatenate(g["sharp"])))
+        lips = float(np.nanmedian(np.concatenate(g["lip_sharp"]))) / ref_lips
+        jumps = np.concatenate(g["join_steps"]) if g.get("join_steps") else np.array([])
         row = {"figure": "samples", "case": f"{what}: {m} ({count} held-out sentences)",
                "lip_r": round(float(np.nanmean(g["r"])), 3),
                "sharpness_vs_" + reference: round(sharp / ref_sharp, 3),
+               "lips_sharpness_vs_" + reference: round(lips, 3),
                "pbm_closed": round(float(closed.mean()) if closed.size else float("nan"), 3),
                "range": round(float(opening[ok].std() / real_open[ok].std()), 3),
                "pops_over_" + reference: round(float(np.nanmean(g["pops"])) / ref_pops, 2),
                "detector_auc": round(logistic_auc(x, y, groups), 3)}
+        if np.isfinite(jumps).any():  # the mouth box's step into a new run, over the real steps' p99
+            row["join_step_p99_over_" + reference] = round(float(np.nanpercentile(jumps, 99)) / ref_step, 2)
+            row["joins"] = int(np.isfinite(jumps).sum())
         if raw_sharp is not None and m in raw_sharp:
             row["sharpness_before_encoding"] = round(float(np.nanmedian(raw_sharp[m])) / float(
                 np.nanmedian(ref.get("raw_sharp", [ref_sharp]))), 3)
         rows.append(row)
     rows.append({"figure": "samples", "case": f"{what}: {reference} frames, re-encoded",
                  "pbm_closed": round(float(np.concatenate(ref["closed"]).mean()), 3) if "closed" in ref else None,
-                 "mouth_sharpness": round(ref_sharp, 1), "pops_p99": round(ref_pops, 2),
+                 "mouth_sharpness": round(ref_sharp, 1), "lips_sharpness": round(ref_lips, 1),
+                 "pops_p99": round(ref_pops, 2), "box_step_p99": round(ref_step, 2),
                  "open_std": round(float(np.nanstd(ref_open)), 4)})
 
 
@@ -349,20 +400,31 @@ def _dub_rows(ctx: Context, bank, pairs, mesh, rows: List[dict]) -> None:
     from ..pipeline.animator import Animator
     from ..pipeline.dubbing import dub
 
+    from ..pipeline.samplepath import SamplePath, bank_samples
+    from ..selection import plan
+
     closures = set(load_map(DEFAULT_MAP).closures)
-    got: Dict[str, Dict[str, list]] = {"input": {}, "dub samples": {}, "dub old morph": {}}
+    methods = {f"dub {m}": m for m in METHODS[:3]}
+    got: Dict[str, Dict[str, list]] = {"input": {}, **{m: {} for m in methods}}
     for a, b in pairs:
         fps = grid.track(b).fps
         real_open = grid.real_measures(b)["opening"]
         anim = Animator(bank, grid.alignment_of(b).phones, fps=fps, samples="off")  # the same schedule as dub's
-        for m, option in (("dub samples", "on"), ("dub old morph", "off")):
-            out = ctx.tmp / f"dub-{a}-{b}-{option}.mp4"
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
-                dub(grid.video(a), grid.video(b), out, text=grid.transcript(b), bank=bank, quiet=True,
-                    cache=ctx.tmp / "dub-cache", samples=option)
+        joins = SamplePath(bank_samples(bank, "on"), anim.specs, anim.phones, anim.fps, anim.pmap, bank.rest,
+                           timing=anim.timing).selection.joins  # dub's own selection (the plan does not change it)
+        for m, method in methods.items():
+            out = ctx.tmp / f"dub-{a}-{b}.mp4"
+            keep, plan.JOIN_FRAMES = plan.JOIN_FRAMES, JOINS.get(method, plan.JOIN_FRAMES)
+            try:
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore")
+                    dub(grid.video(a), grid.video(b), out, text=grid.transcript(b), bank=bank, quiet=True,
+                        cache=ctx.tmp / "dub-cache", samples="on" if method.startswith("samples") else "off")
+            finally:
+                plan.JOIN_FRAMES = keep
             frames = [np.array(f) for f in read_video(out)]
-            got_m = _measure(frames, anim, fps, mesh, real_open, closures)
+            got_m = _measure(frames, anim, fps, mesh, real_open, closures,
+                             joins if method.startswith("samples") else None)
             got_m.pop("points")
             for k, v in got_m.items():
                 got[m].setdefault(k, []).append(v)

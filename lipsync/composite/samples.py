@@ -1,13 +1,14 @@
 """Real mouth samples onto a plate: one warp from the source frame's crop to the output pixel.
 
 A frame that shows a sample as it is (:func:`lipsync.selection.frame_plan`: inside a run of
-the source, or a join's last frame) is written with **one** resample::
+the source, or a join's last frame) is written with **one** resample at most::
 
     sample crop --(pose o affine: stabilisation, pose onto the plate, placement, as one 2x3)-->
     plate ROI --colour LUT--> --feathered mask blend--> plate frame (in place)
 
 bicubic (:data:`INTERPOLATION`), at the footage's own scale (a bank made from video keeps
-it: nothing is upscaled). Across a join the two samples are brought into the bank's box
+it: nothing is upscaled); where that map is a translation (a dub onto the bank's own
+speaker: :data:`SNAP_PX`) the crop is copied at a whole-pixel offset, not resampled. Across a join the two samples are brought into the bank's box
 (one resample each), morphed by the Beier–Neely flow between their lip lines (the paper's
 method, computed once per pair and kept in the flow store) and composited as the viseme
 morph is (:meth:`lipsync.composite.plate.PlateCompositor.apply`).
@@ -41,8 +42,9 @@ import numpy as np
 from .plate import PlateCompositor, compose, pose_inverse
 
 #: The one resample from the source crop to the output: bicubic keeps the Laplacian's
-#: variance of GRID s1's mouths within a few per cent at a sub-pixel shift, where bilinear
-#: loses a fifth of it (``python -m lipsync.bench --only samples``, the per-stage figures).
+#: variance of GRID s1's stored crops at 0.97-1.00 through the bank's 0.96 scale (any
+#: sub-pixel shift), where bilinear keeps 0.64-0.72; a fractional shift at scale 1 costs
+#: more (see :data:`SNAP_PX`).
 INTERPOLATION = cv2.INTER_CUBIC
 #: A paste whose map from the crop to the output is a translation to within this many pixels
 #: (the linear part's residual at the crop's corners) is a copy at the nearest whole-pixel
