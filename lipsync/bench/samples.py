@@ -404,7 +404,7 @@ def _dub_rows(ctx: Context, bank, pairs, mesh, rows: List[dict]) -> None:
     from ..selection import plan
 
     closures = set(load_map(DEFAULT_MAP).closures)
-    methods = {f"dub {m}": m for m in METHODS[:3]}
+    methods = {m: m for m in METHODS[:3]}
     got: Dict[str, Dict[str, list]] = {"input": {}, **{m: {} for m in methods}}
     for a, b in pairs:
         fps = grid.track(b).fps
