@@ -3,26 +3,33 @@
 A bank is made from GRID's :data:`~lipsync.bench.grid.BANK_CLIPS` (three in ``--quick``)
 with its samples; the held-out sentences (:func:`~lipsync.bench.grid.held_out`) are
 
-* **rendered** from their own alignment on the bank's plate three ways from the same bank
-  and cues — **samples** (``--samples on``), **old morph** (``--samples off``, one picture
-  per viseme, the flow morph) and **hard cuts** (the nearer picture, no morph) — each
-  encoded as ``lipsync render`` encodes (H.264, crf 18, talking-head) and decoded;
+* **rendered** from their own alignment on the bank's plate each way of :data:`METHODS`
+  from the same bank and cues — **samples** (``--samples on``) with joins morphed over one
+  frame and with joins cut (:data:`lipsync.selection.plan.JOIN_FRAMES` 1 and 0), **old
+  morph** (``--samples off``, one picture per viseme, the flow morph) and **hard cuts**
+  (the nearer picture, no morph) — each encoded as ``lipsync render`` encodes (H.264, crf
+  18, talking-head) and decoded;
 * **dubbed**: held-out video A re-voiced with held-out B's sound and transcript
-  (:func:`lipsync.dub`, the same bank, samples on and off).
+  (:func:`lipsync.dub`, the same bank: samples with joins morphed, cut, and off).
 
 Measured on the decoded frames (the face mesh tracked through them): **lip r** (inner-lip
 opening against B's real frames, mean over sentences), **sharpness** (median variance of
 the Laplacian of the mouth box, :func:`lipsync.bench.videobank.mouth_sharpness`) over the
-real frames' (render) or the input video's (dub), **closed** (share of frames the sequencer
+real frames' (render) or the input video's (dub), and the same of the lips' own box
+(:func:`lip_sharpness`: the mouth box reaches the samples' mask edge and, below it, the
+plate's chin, which is the plate's sharpness, not the mouth's), **closed** (share of frames the sequencer
 shows a P/B/M closure whose tracked opening is at most
 :data:`lipsync.selection.select.CLOSED`), **range** (standard deviation of the opening over
 the real one's), **pops** (99th percentile of the grey change above the nose over the
-real clips'), and a **detector AUC**: logistic regression (numpy, :func:`logistic_auc`) on
+real clips'), the **join step** (the mouth box's p99 change into a new run of samples,
+:func:`join_steps`, over the real frames' p99 change), and a **detector AUC**: logistic regression (numpy, :func:`logistic_auc`) on
 HOG and Laplacian-histogram features of 64x48 mouth crops, real frames re-encoded the
 same way, cross-validated by sentence (0.5: cannot tell them apart).
 
-Sharpness per stage: the source crops (the footage's mouth box), the crops as stored
-(``samples.mp4`` decoded), the frames as pasted (before encoding), as encoded.
+Sharpness per stage: the source crops (the footage's mouth box) against the crops as
+stored (``samples.mp4`` decoded); then, in the lips' box over the held-out real frames, the
+bank's footage (what the samples are cut from), the plate under the render, each method
+before and after encoding (:func:`_stage_sharpness_row`).
 
 Cost: selection seconds per second of speech (a 10-minute timeline of held-out alignments
 joined), CPU per frame (``time.thread_time``) of today's frame and of a samples frame at
