@@ -128,8 +128,9 @@ def _timeline(bank, fps: float):
     return anim.alignment.phones, anim
 
 
-def _renders(bank, clip: Path, tmp: Path, mesh, closures, sheets: Optional[Path]) -> Dict[str, dict]:
-    """hello.wav rendered on the bank's plate each way, against the clip's own frames."""
+def _renders(bank, clip: Path, tmp: Path, mesh, closures, sheets: Optional[Path]) -> tuple:
+    """hello.wav rendered on the bank's plate each way: the rows (against the clip's own
+    frames) and the clip's own measures."""
     from lipsync.bench.samples import _encoded, render_method
     from lipsync.face.video import probe_video
 
