@@ -88,9 +88,8 @@ def test_a_session_given_the_whole_sentence_chooses_the_offline_path(bank, sente
     got = [live.sample(n) for n in range(len(anim))]
     assert got == offline.tolist()
     assert live.samples.selection.windows == 1        # one plan: the whole utterance, as offline
-    # not a trivial path: runs of real footage, joined by morphs
-    assert len(set(got)) > 20 and (np.diff(offline) == 1).mean() > 0.5
-    assert (anim.sample_path.alpha < 1).sum() >= 3
+    # not a trivial path: runs of real footage, and joins between them
+    assert len(set(got)) > 20 and (np.diff(offline) == 1).mean() > 0.5 and (np.diff(offline) != 1).sum() >= 3
     for n in range(len(anim)):
         assert np.array_equal(live.frame(n), anim.frame(n)), n
     # the viseme the sequencer shows is unchanged by samples
@@ -119,7 +118,7 @@ def test_with_a_short_lookahead_the_path_is_continuous_and_frames_are_their_samp
     assert path.tolist() == [fixed[k] for k in range(total)]   # nothing retracted
     # what each frame shows is the offline frame_plan over the fixed path
     src, dst, alpha = frame_plan(path, live.samples.shared.selector.succ, np.array(sel.exact[:total]))
-    assert (alpha < 1).any()                           # some joins morphed
+    assert (live.samples.shared.selector.succ[path[:-1]] != path[1:]).sum() >= 3      # joins
     for k in range(total):
         want = _composite(live, k, (int(src[k]), int(dst[k]), float(alpha[k])))
         assert np.array_equal(shown[k], want), k
