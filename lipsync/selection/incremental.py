@@ -26,8 +26,10 @@ Examples
 ...                            pmap=SimpleNamespace(targets=None))
 >>> inc = Incremental(selector, fps=25)
 >>> inc.path, inc.exact = [0, 1, 3], [False, False, False]     # fixed: a run, then a join
->>> [tuple(round(float(x), 2) for x in inc.shows(n)) for n in range(3)]
+>>> [tuple(round(float(x), 2) for x in inc.shows(n, join_frames=1)) for n in range(3)]   # a join morphed
 [(0.0, 0.0, 1.0), (1.0, 1.0, 1.0), (2.0, 3.0, 0.5)]
+>>> inc.shows(2, join_frames=0)                                     # cut
+(3, 3, 1.0)
 """
 
 from __future__ import annotations
