@@ -155,7 +155,7 @@ class LiveServer:
         self.tmp = Path(tempfile.mkdtemp(prefix="lipsync-serve-"))
         self.jobs = Jobs(self.tmp, bank=self.bank, store=self.store, fps=config.fps, map=config.map,
                          timing=config.timing, method=config.method, max_clip_seconds=config.max_clip_seconds,
-                         job_timeout=config.job_timeout)
+                         job_timeout=config.job_timeout, samples=config.samples)
         self.sessions: set = set()
         self.stats = {"frames": 0, "errors": 0, "sessions_total": 0, "refused_sessions": 0}
         self.app = Guard(self._routes(), session=session, max_body=config.max_upload,
