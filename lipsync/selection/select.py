@@ -71,6 +71,13 @@ TARGET_GAIN = 1.3
 #: 0.762 / 0.759 / 0.741; on held_out()[:18], never tuned on, 0.733 (share 0) -> 0.802 (0.5),
 #: the pictures' schedule alone 0.791 there.
 PICTURE_SHARE = 0.5
+#: Shares (opening, width) of the target taken from the speech's own prediction (the
+#: bank's audio lip model, :mod:`lipsync.samples.lipmodel`) where the render has the sound.
+#: Chosen on held_out()[18:30]: see the figures below.
+AUDIO_SHARE = (0.5, 0.0)
+#: The prediction's excursion from its mean is scaled by this: a ridge regression's
+#: prediction undershoots the real range.
+AUDIO_GAIN = 1.5
 #: Candidates per frame from the viseme's tree: 24 keep the cost of a 10-minute clip's
 #: selection to seconds (K^2 joins per frame).
 NEAREST = 24
@@ -179,14 +186,16 @@ def viseme_of(labels: np.ndarray, pmap, rest: str) -> np.ndarray:
 
 
 def make_target(samples, specs, timeline, fps: float, pmap, rest: str, closures: Sequence[str],
-                params=None) -> Target:
+                params=None, audio: Optional[np.ndarray] = None) -> Target:
     """The :class:`Target` of a render's frames (``specs``, the sequencer's) and phones.
 
     The predicted lip opening and width are the dominance model's schedule *of the phones*
     (:func:`phone_schedule`: each phone its own shape, valued at its samples' median) when
     the timeline has phones, else of the visemes (``specs``); where the table has the
     pictures' openings, the opening is blended with the pictures' schedule
-    (:data:`PICTURE_SHARE`)."""
+    (:data:`PICTURE_SHARE`). ``audio``, ``(frames, 2)``: the opening and width the speech
+    predicts (:meth:`lipsync.samples.lipmodel.LipModel.predict`), blended in by
+    :data:`AUDIO_SHARE` (None: the phones' target alone)."""
     from ..motion.coarticulation import predicted
 
     n = len(specs)
@@ -208,8 +217,29 @@ def make_target(samples, specs, timeline, fps: float, pmap, rest: str, closures:
                           {s.from_viseme for s in specs} | {s.to_viseme for s in specs}, closures)
         opening = predicted(specs, {v: x[0] for v, x in values.items()})
         width = predicted(specs, {v: x[1] for v, x in values.items()})
+    if audio is not None and n:
+        opening, width = with_audio(opening, width, audio)
     return Target(phone=phone, prev=prev, next=nxt, viseme=view, opening=opening, width=width, closed=closed,
                   rest=(view == rest) & (phone == "sil"), position=positions(phone))
+
+
+def with_audio(opening: np.ndarray, width: np.ndarray, audio: np.ndarray):
+    """The target ``opening`` and ``width`` blended with the speech's prediction ``audio``
+    (``(frames, 2)``; a shorter one's last row repeated) by :data:`AUDIO_SHARE`, the
+    prediction's excursion from its mean scaled by :data:`AUDIO_GAIN`.
+
+    Examples
+    --------
+    >>> o, w = with_audio(np.zeros(3), np.ones(3), np.array([[0.2, 1.0], [0.4, 1.0]]))
+    >>> np.round(o / AUDIO_SHARE[0], 6).tolist() == np.round(0.3 + AUDIO_GAIN * np.array([-0.1, 0.1, 0.1]), 6).tolist()
+    True
+    """
+    a = np.asarray(audio, np.float64)[:len(opening)]
+    if len(a) < len(opening):
+        a = np.vstack([a, np.repeat(a[-1:], len(opening) - len(a), axis=0)])
+    a = a.mean(axis=0) + AUDIO_GAIN * (a - a.mean(axis=0))
+    return ((1.0 - AUDIO_SHARE[0]) * opening + AUDIO_SHARE[0] * a[:, 0],
+            (1.0 - AUDIO_SHARE[1]) * width + AUDIO_SHARE[1] * a[:, 1])
 
 
 def picture_openings(samples) -> Dict[str, float]:
@@ -395,11 +425,12 @@ class Selector:
             ids = np.concatenate([ids, nxt[self.allowed(nxt, kind)]])
         return np.unique(ids)
 
-    def select(self, specs, timeline, fps: float, params=None) -> Selection:
+    def select(self, specs, timeline, fps: float, params=None, audio=None) -> Selection:
         """One sample per frame of ``specs`` (the sequencer's schedule) for the phones of
-        ``timeline``; ``params``: the dominance model's constants (the bank's)."""
+        ``timeline``; ``params``: the dominance model's constants (the bank's); ``audio``:
+        the speech's predicted opening and width per frame (:func:`make_target`)."""
         t0 = time.perf_counter()
-        tg = make_target(self.samples, specs, timeline, fps, self.pmap, self.rest, self.closures, params)
+        tg = make_target(self.samples, specs, timeline, fps, self.pmap, self.rest, self.closures, params, audio)
         v = Viterbi()
         count = 0
         codes = tuple(self.encode(x) for x in (tg.phone, tg.prev, tg.next, tg.viseme))
