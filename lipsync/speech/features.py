@@ -3,7 +3,7 @@
 For the audio-driven lip target (:mod:`lipsync.samples.lipmodel`): the samples are cut into
 25 ms Hann windows every 10 ms (:data:`WINDOW`, :data:`HOP`), each window gives
 :data:`MELS` log mel-band energies, its log energy and a voicing degree (the normalised
-autocorrelation's peak at a pitch lag); video frame ``i`` (time ``i / fps`` to
+autocorrelation's peak at a pitch lag, over the window's); video frame ``i`` (time ``i / fps`` to
 ``(i + 1) / fps``) takes the mean of the windows centred in its span. :func:`normalised`
 removes each column's mean and scales it by its standard deviation over the utterance (so a
 louder recording or another voice gives features on the same scale) and :func:`stacked`
@@ -34,8 +34,9 @@ WINDOW, HOP = 0.025, 0.010
 MELS, FMIN, FMAX = 24, 100.0, 7600.0
 #: Columns: the mel bands, then log energy, then voicing.
 ENERGY, VOICING = MELS, MELS + 1
-#: Pitch lags searched for voicing, Hz: a low man's voice to a child's.
-PITCH = (60.0, 400.0)
+#: Pitch lags searched for voicing, Hz: a low man's voice to a child's (lags up to half the
+#: window: beyond it the window's own autocorrelation is too small to divide by).
+PITCH = (80.0, 400.0)
 #: Power floor under the logs (a digital silence gives finite features).
 FLOOR = 1e-10
 
@@ -86,8 +87,11 @@ def frame_features(pcm: np.ndarray, sample_rate: int, fps: float, frames: Option
     mel = np.log(power[:, ::2] @ mel_filters(sample_rate, nfft).T + FLOOR)
     energy = np.log(power.sum(axis=1) / (2 * nfft) + FLOOR)
     ac = np.fft.irfft(power, axis=1)
-    lags = slice(int(sample_rate / PITCH[1]), int(sample_rate / PITCH[0]) + 1)
-    voicing = np.clip(ac[:, lags].max(axis=1) / np.maximum(ac[:, 0], FLOOR), 0.0, 1.0)
+    # over the window's own autocorrelation (Boersma 1993): a periodic sound scores near 1
+    # whatever its lag, where the bare Hann-windowed peak falls with the lag
+    wac = np.fft.irfft(np.abs(np.fft.rfft(np.hanning(win), n=2 * nfft)) ** 2)
+    lags = slice(int(sample_rate / PITCH[1]), min(int(sample_rate / PITCH[0]), win // 2) + 1)
+    voicing = np.clip((ac[:, lags] / wac[lags]).max(axis=1) * wac[0] / np.maximum(ac[:, 0], FLOOR), 0.0, 1.0)
     per_window = np.c_[mel, energy, voicing]
     which = np.floor(np.arange(count) * hop / sample_rate * fps).astype(np.int64)
     keep = which < n
