@@ -21,6 +21,13 @@ real clips'), and a **detector AUC**: logistic regression (numpy, :func:`logisti
 HOG and Laplacian-histogram features of 64x48 mouth crops, real frames re-encoded the
 same way, cross-validated by sentence (0.5: cannot tell them apart).
 
+**Target** rows (no render, the same held-out sentences): lip r of the bank's audio lip
+model's prediction alone (:mod:`lipsync.samples.lipmodel`), of the phones' target and of
+the audio target, of the samples each selects, and of an oracle target (the real opening
+as the target: what the selection could reach with a perfect prediction). The dubs are
+measured with the audio target and with the phones' alone; their speech is another GRID s1
+sentence, so the voice is the bank's own speaker's.
+
 Sharpness per stage: the source crops (the footage's mouth box), the crops as stored
 (``samples.mp4`` decoded), the frames as pasted (before encoding), as encoded.
 
@@ -33,6 +40,7 @@ the bank's size on disk.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import subprocess
 import sys
@@ -46,10 +54,13 @@ import numpy as np
 from . import FIGURES, Context
 from . import grid
 
-#: The renderings compared, in the order printed.
-METHODS = ("samples", "samples, joins cut", "old morph", "hard cuts")
+#: The renderings compared, in the order printed: "samples" selects for the phones' target
+#: alone (no sound), "samples, audio target" for the target the speech's own sound moves
+#: (the bank's audio lip model, lipsync.samples.lipmodel: what ``lipsync render AUDIO`` does).
+METHODS = ("samples, audio target", "samples", "samples, joins cut", "old morph", "hard cuts")
 #: Held-out sentences from this index on tuned the selection (lipsync.selection.select.WEIGHTS,
-#: TARGET_GAIN, lipsync.selection.plan.JOIN_FRAMES on [24:30]; PICTURE_SHARE on [18:30]): the
+#: TARGET_GAIN, lipsync.selection.plan.JOIN_FRAMES on [24:30]; PICTURE_SHARE, AUDIO_SHARE,
+#: AUDIO_GAIN, AUDIO_OPEN_WEIGHT and lipsync.samples.lipmodel.CONTEXT on [18:30]): the
 #: figure judges on the ones before.
 TUNED_FROM = 18
 #: Mouth crops the detector sees: (W, H) grey.
@@ -86,7 +97,8 @@ def _frames(bank, clip: str, method: str) -> tuple:
     keep, plan.JOIN_FRAMES = plan.JOIN_FRAMES, 0 if method == "samples, joins cut" else plan.JOIN_FRAMES
     try:
         anim = Animator(bank, grid.alignment_of(clip).phones, fps=fps,
-                        samples="on" if method.startswith("samples") else "off")
+                        samples="on" if method.startswith("samples") else "off",
+                        audio=grid.video(clip) if method == "samples, audio target" else None)
     finally:
         plan.JOIN_FRAMES = keep
     n = min(len(anim), len(grid.track(clip)))
@@ -262,14 +274,15 @@ def _dub_rows(ctx: Context, bank, pairs, mesh, rows: List[dict]) -> None:
     from ..pipeline.dubbing import dub
 
     closures = set(load_map(DEFAULT_MAP).closures)
-    got: Dict[str, Dict[str, list]] = {"input": {}, "dub samples": {}, "dub old morph": {}}
+    ways = (("dub samples, audio target", "on"), ("dub samples, phones' target", "on"), ("dub old morph", "off"))
+    got: Dict[str, Dict[str, list]] = {"input": {}, **{m: {} for m, _ in ways}}
     for a, b in pairs:
         fps = grid.track(b).fps
         real_open = grid.real_measures(b)["opening"]
         anim = Animator(bank, grid.alignment_of(b).phones, fps=fps, samples="off")  # the same schedule as dub's
-        for m, option in (("dub samples", "on"), ("dub old morph", "off")):
+        for m, option in ways:
             out = ctx.tmp / f"dub-{a}-{b}-{option}.mp4"
-            with warnings.catch_warnings():
+            with warnings.catch_warnings(), phones_target(m.endswith("phones' target")):
                 warnings.simplefilter("ignore")
                 dub(grid.video(a), grid.video(b), out, text=grid.transcript(b), bank=bank, quiet=True,
                     cache=ctx.tmp / "dub-cache", samples=option)
@@ -286,6 +299,64 @@ def _dub_rows(ctx: Context, bank, pairs, mesh, rows: List[dict]) -> None:
             got["input"].setdefault(k, []).append(v)
         got["input"].setdefault("clip", []).append([b] * len(inp["features"]))
     _quality_rows("dub", got, None, "input", rows, len(pairs))
+
+
+@contextlib.contextmanager
+def phones_target(on: bool = True):
+    """While on, the selection ignores the speech's prediction (today's target from the phones
+    alone), though the dub hands it the sound."""
+    from ..selection import select as S
+
+    keep = S.AUDIO_SHARE, S.AUDIO_OPEN_WEIGHT
+    if on:
+        S.AUDIO_SHARE, S.AUDIO_OPEN_WEIGHT = (0.0, 0.0), 1.0
+    try:
+        yield
+    finally:
+        S.AUDIO_SHARE, S.AUDIO_OPEN_WEIGHT = keep
+
+
+def target_rows(bank, clips: List[str], rows: List[dict]) -> None:
+    """Lip-opening r against the real speaker without rendering: of the speech's prediction
+    alone, of the phones' target and the audio target, and of the samples each selects; and
+    an oracle (the real opening itself as the target: what the selection can reach)."""
+    from ..motion.coarticulation import DominanceParams
+    from ..pipeline.animator import Animator
+    from ..pipeline.samplepath import _selector, bank_samples, speech_prediction
+    from ..selection import select as S
+
+    samples = bank_samples(bank, "on")
+    got: Dict[str, list] = {}
+    for clip in clips:
+        anim = Animator(bank, grid.alignment_of(clip).phones, fps=grid.track(clip).fps, samples="off")
+        params = anim.timing if isinstance(anim.timing, DominanceParams) else None
+        sel = _selector(samples, anim.pmap, bank.rest)
+        real = grid.real_measures(clip)
+        pred = speech_prediction(samples, grid.video(clip), anim.fps, len(anim.specs))
+        n = min(len(real["opening"]), len(anim.specs))
+        oracle = np.c_[np.nan_to_num(real["opening"][:n], nan=float(np.nanmedian(real["opening"]))),
+                       np.nan_to_num(real["width"][:n], nan=float(np.nanmedian(real["width"])))]
+        r = lambda x: grid.correlation(x[:n], real["opening"][:n])
+        got.setdefault("prediction", []).append(r(pred[:, 0]))
+        for name, audio, share in (("phones", None, S.AUDIO_SHARE), ("audio", pred, S.AUDIO_SHARE),
+                                   ("oracle", oracle, (1.0, 1.0))):
+            keep = S.AUDIO_SHARE, S.AUDIO_GAIN
+            S.AUDIO_SHARE, S.AUDIO_GAIN = share, (S.AUDIO_GAIN if name == "audio" else 1.0)
+            try:
+                s = sel.select(anim.specs, anim.phones, anim.fps, params, audio=audio)
+            finally:
+                S.AUDIO_SHARE, S.AUDIO_GAIN = keep
+            got.setdefault(name + " target", []).append(r(s.target.opening))
+            got.setdefault(name + " selected", []).append(r(samples.opening[s.samples]))
+    m = {k: round(float(np.mean(v)), 3) for k, v in got.items()}
+    case = f"({len(clips)} held-out sentences, no render)"
+    rows.append({"figure": "samples", "case": f"target: the speech's prediction alone {case}",
+                 "lip_r": m["prediction"]})
+    for name, what in (("phones", "today's target (phones, pictures)"),
+                       ("audio", f"audio target (share {S.AUDIO_SHARE[0]} of the prediction)"),
+                       ("oracle", "oracle target (the real opening and width)")):
+        rows.append({"figure": "samples", "case": f"target: {what} {case}", "target_r": m[name + " target"],
+                     "selected_r": m[name + " selected"]})
 
 
 def _stage_rows(bank, rows: List[dict]) -> None:
@@ -455,6 +526,7 @@ def samples_figures(ctx: Context, rows: List[dict]) -> None:
     _stage_rows(bank, rows)
     _selection_rows(bank, rows)
     judged = held[:TUNED_FROM]  # the selection's weights were chosen on the rest
+    target_rows(bank, judged, rows)
     _render_rows(ctx, bank, judged[:6] if ctx.quick else judged, mesh, rows)
     pairs = list(zip(judged[0::2], judged[1::2]))[: 3 if ctx.quick else 10]
     _dub_rows(ctx, bank, pairs, mesh, rows)

@@ -34,13 +34,14 @@ from ..speech.features import MELS, frame_features, normalised, stacked
 FEATURES = MELS + 2
 #: Frames of context either side: the lips open ahead of the sound and close after it.
 #: Prediction r on GRID s1's tuning sentences (held_out()[18:30], bank of the ten bank
-#: sentences): 2 / 3 / 4 / 6 frames gave 0.751 / 0.751 / 0.746 / 0.739 (more context, more
-#: weights than 30 s of footage pins down).
+#: sentences): 2 / 3 / 4 frames gave 0.760 / 0.758 / 0.756 (more context, more weights than
+#: 30 s of footage pins down); adding deltas (0.759 / 0.756 / 0.753) or 13 cepstra in place
+#: of the mel bands (0.751 / 0.747 / 0.740) did no better. 3 keeps 120 ms either side.
 CONTEXT = 3
 #: The most context a stored model may have (a bound on the arrays ``lipsync check`` reads).
 MAX_CONTEXT = 12
 #: Ridge strengths tried; the one with the best leave-one-clip-out r of the opening is kept
-#: (GRID s1: 100; 10 and 1000 were 0.01-0.05 worse).
+#: (GRID s1's bank: 30).
 LAMBDAS = (10.0, 30.0, 100.0, 300.0, 1000.0)
 #: Groups for the cross-validation when the footage is a single clip: contiguous blocks.
 BLOCKS = 5
