@@ -201,3 +201,22 @@ def test_check_names_a_table_whose_model_is_not_finite(tmp_path, capsys):
     assert lipsync(["check", str(b)]) == 2
     err = capsys.readouterr().err
     assert "samples.npz" in err and "'lip_weights'" in err and "finite" in err and "Traceback" not in err
+
+
+def test_an_animator_given_the_speech_selects_for_it(grid_samples):
+    """``Animator(..., audio=)`` (what render_clip, from_audio and dub hand on): the sample path
+    predicts from that sound; without it, today's target."""
+    from lipsync.pipeline.animator import Animator
+    from lipsync.readers.grid import read_words
+    from lipsync.speech.phonetise import words_to_phones
+
+    bank, samples = grid_samples
+    p = GRID / "prap6p.align"  # GRID's own word times, split into phones (no aligner run)
+    phones = words_to_phones(read_words(str(p), p.read_bytes()))
+    heard = Animator(bank, phones, fps=25, samples="on", audio=GRID / "prap6p.mpg")
+    plain = Animator(bank, phones, fps=25, samples="on")
+    assert plain.sample_path.audio_prediction is None
+    pred = heard.sample_path.audio_prediction
+    assert pred.shape == (len(heard), 2)
+    assert not np.allclose(heard.sample_path.selection.target.opening, plain.sample_path.selection.target.opening)
+    assert [s.alpha for s in heard.specs] == [s.alpha for s in plain.specs]  # the schedule is the phones'
