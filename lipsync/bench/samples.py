@@ -318,11 +318,14 @@ def phones_target(on: bool = True):
 
 def target_rows(bank, clips: List[str], rows: List[dict]) -> None:
     """Lip-opening r against the real speaker without rendering: of the speech's prediction
-    alone, of the phones' target and the audio target, and of the samples each selects; and
+    alone, of the phones' target and the audio target, of the samples each selects (their
+    stored openings, and blended across joins by the frame plan's alpha as a render morphs
+    them: ``joins_blended_r``); and
     an oracle (the real opening itself as the target: what the selection can reach)."""
     from ..motion.coarticulation import DominanceParams
     from ..pipeline.animator import Animator
     from ..pipeline.samplepath import _selector, bank_samples, speech_prediction
+    from ..selection import frame_plan
     from ..selection import select as S
 
     samples = bank_samples(bank, "on")
@@ -348,6 +351,10 @@ def target_rows(bank, clips: List[str], rows: List[dict]) -> None:
                 S.AUDIO_SHARE, S.AUDIO_GAIN = keep
             got.setdefault(name + " target", []).append(r(s.target.opening))
             got.setdefault(name + " selected", []).append(r(samples.opening[s.samples]))
+            src, dst, alpha = frame_plan(s.samples, sel.succ, s.target.closed | s.target.rest)
+            got.setdefault(name + " planned", []).append(r((1 - alpha) * samples.opening[src] +
+                                                           alpha * samples.opening[dst]))
+            got.setdefault(name + " runs", []).append(s.runs())
     m = {k: round(float(np.mean(v)), 3) for k, v in got.items()}
     case = f"({len(clips)} held-out sentences, no render)"
     rows.append({"figure": "samples", "case": f"target: the speech's prediction alone {case}",
@@ -356,7 +363,8 @@ def target_rows(bank, clips: List[str], rows: List[dict]) -> None:
                        ("audio", f"audio target (share {S.AUDIO_SHARE[0]} of the prediction)"),
                        ("oracle", "oracle target (the real opening and width)")):
         rows.append({"figure": "samples", "case": f"target: {what} {case}", "target_r": m[name + " target"],
-                     "selected_r": m[name + " selected"]})
+                     "selected_r": m[name + " selected"], "joins_blended_r": m[name + " planned"],
+                     "mean_run_frames": round(m[name + " runs"], 2)})
 
 
 def _stage_rows(bank, rows: List[dict]) -> None:
