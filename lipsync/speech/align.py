@@ -243,6 +243,12 @@ WIDE_BEAMS = dict(beam=1e-200, pbeam=1e-200, wbeam=1e-200)
 #: True while another language is aligned: :func:`_aligner` gives the wide-beam decoder and
 #: the fit check takes the other languages' rules (:func:`_fit_rules`).
 _WIDE = contextvars.ContextVar("lipsync_other_language", default=False)
+#: Probability of a pause: pocketsphinx's optional silence, which every grammar allows
+#: before, between and after the words (its ``silprob``, read when a grammar is added).
+#: pocketsphinx's own value; a language may set its own
+#: (:data:`lipsync.speech.languages.PAUSE_PROB`).
+PAUSE_PROB = 0.005
+_PAUSE_PROB = contextvars.ContextVar("lipsync_pause_prob", default=PAUSE_PROB)
 
 
 def _aligner():
@@ -297,6 +303,7 @@ def _arcs(decoder, word: str) -> List[str]:
 
 
 def _use_grammar(decoder, name: str, final: int, transitions) -> None:
+    decoder.config["silprob"] = _PAUSE_PROB.get()
     decoder.add_fsg(name, decoder.create_fsg(name, 0, final, transitions))
     decoder.activate_search(name)
 

@@ -117,6 +117,22 @@ LANGUAGE_UNITS: Dict[str, Dict[str, Tuple[str, ...]]] = {
 }
 
 
+#: Per espeak-ng voice: the probability of a pause between the words
+#: (:data:`lipsync.speech.align.PAUSE_PROB`, pocketsphinx's 0.005 for the others). In the
+#: tone languages the search put silence over speech the en-us units fit loosely and
+#: squeezed the words around it into what was left: on the tuning half (``--only
+#: languages``, 130 sentences) the pauses it put inside speech exceeded espeak-ng's own by
+#: 3.3 s in 25.8 s of Vietnamese and 2.2 s in 16.7 s of Mandarin (13 % of the speech), by
+#: at most 0.8 s (5 %, Dutch) in any other language (0.49 s of silence over "một ngôi",
+#: whose words then came 0.3 s late). A real pause costs one step (``log`` of this) whatever
+#: its length, far less than speech units forced over it. Frame agreement with the
+#: transcript, tuning half, Vietnamese / Mandarin: 0.005 0.764 / 0.804; 1e-3 0.777 /
+#: 0.821; 1e-5 0.844 / 0.833; 1e-10 0.873 / 0.871; 1e-20 the same. For every other
+#: language too (tried, not used), 1e-10 raised the tuning half's mean from 0.841 to 0.854
+#: but lowered seven languages' held-out figures by 0.003 to 0.008 (docs/languages.md).
+PAUSE_PROB: Dict[str, float] = {"vi": 1e-10, "cmn": 1e-10}
+
+
 def _units(phone: str, lang: str = "") -> Tuple[str, ...]:
     """The en-us ARPAbet acoustic units standing for one IPA segment: the closest by
     features (open a as AA, by sound: the phonetics room's overrides), an affricate or
@@ -194,7 +210,7 @@ def align_language(pcm, text: Optional[str], lang: str, *, quiet: bool = True, p
     ...     print([], True)
     [] True
     """
-    from ..phonetics.g2p import languages, resolve, transcribe
+    from ..phonetics.g2p import _voices, languages, resolve, transcribe
     from . import align as A
     from .text import shown_words
 
@@ -223,9 +239,11 @@ def align_language(pcm, text: Optional[str], lang: str, *, quiet: bool = True, p
         return plans[n][0] if n in plans else n
 
     token = A._WIDE.set(True)
+    pause = A._PAUSE_PROB.set(PAUSE_PROB.get(_voices()[code][0], A.PAUSE_PROB))
     try:
         al = _align_with_edges(A, pcm, tuple(names), quiet=quiet, path=path, jobs=jobs, shown=shown)
     finally:
+        A._PAUSE_PROB.reset(pause)
         A._WIDE.reset(token)
     out = _in_ipa(al, plans, unread)
     voiced = _voiced_frames(pcm)
