@@ -26,6 +26,15 @@ real clips'), the **join step** (the mouth box's p99 change into a new run of sa
 HOG and Laplacian-histogram features of 64x48 mouth crops, real frames re-encoded the
 same way, cross-validated by sentence (0.5: cannot tell them apart).
 
+**Target** rows (no render, the same held-out sentences): lip r of the bank's audio lip
+model's prediction alone (:mod:`lipsync.samples.lipmodel`), of the phones' target and of
+the audio target, of the samples each selects, and of an oracle target (the real opening
+as the target: what the selection could reach with a perfect prediction). **samples, audio
+target** renders and dubs with the speech's prediction in the target (what ``lipsync render
+AUDIO`` and ``lipsync dub`` do, joins as :data:`lipsync.selection.plan.JOIN_FRAMES` says);
+the other sample methods select for the phones' target alone. The dubs' speech is another
+GRID s1 sentence, so the voice is the bank's own speaker's.
+
 Sharpness per stage: the source crops (the footage's mouth box) against the crops as
 stored (``samples.mp4`` decoded); then, in the lips' box over the held-out real frames, the
 bank's footage (what the samples are cut from), the plate under the render, each method
@@ -40,6 +49,7 @@ the bank's size on disk.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import subprocess
 import sys
@@ -53,8 +63,10 @@ import numpy as np
 from . import FIGURES, Context
 from . import grid
 
-#: The renderings compared, in the order printed.
-METHODS = ("samples, joins morphed", "samples, joins cut", "old morph", "hard cuts")
+#: The renderings compared, in the order printed: "samples, audio target" selects for the
+#: target the speech's own sound moves (the bank's audio lip model); the other sample
+#: methods for the phones' target alone (lipsync.selection.select.AUDIO_SHARE 0).
+METHODS = ("samples, audio target", "samples, joins morphed", "samples, joins cut", "old morph", "hard cuts")
 #: lipsync.selection.plan.JOIN_FRAMES of the sample methods (each set explicitly, whatever the default).
 JOINS = {"samples, joins morphed": 1, "samples, joins cut": 0}
 #: :func:`inner_box`'s margins (eye distances: side, up, down) around the outer lips. The
@@ -63,7 +75,8 @@ JOINS = {"samples, joins morphed": 1, "samples, joins cut": 0}
 #: stay inside the mask's solid part, so the seam is not counted as sharpness.
 INNER_MARGIN = (0.1, 0.1, 0.15)
 #: Held-out sentences from this index on tuned the selection (lipsync.selection.select.WEIGHTS,
-#: TARGET_GAIN, lipsync.selection.plan.JOIN_FRAMES on [24:30]; PICTURE_SHARE on [18:30]): the
+#: TARGET_GAIN, lipsync.selection.plan.JOIN_FRAMES on [24:30]; PICTURE_SHARE, AUDIO_SHARE,
+#: AUDIO_GAIN, AUDIO_OPEN_WEIGHT and lipsync.samples.lipmodel.CONTEXT on [18:30]): the
 #: figure judges on the ones before.
 TUNED_FROM = 18
 #: Mouth crops the detector sees: (W, H) grey.
@@ -90,15 +103,17 @@ def _encoded(frames, tmp: Path, fps: float) -> List[np.ndarray]:
     return out
 
 
-def render_method(bank, timeline, fps: float, method: str, n: Optional[int] = None) -> tuple:
+def render_method(bank, timeline, fps: float, method: str, n: Optional[int] = None, audio=None) -> tuple:
     """``timeline`` rendered by ``method`` (one of :data:`METHODS`) onto ``bank``'s plate: the
-    frames (before encoding, at most ``n``) and the Animator (its specs and sample path)."""
+    frames (before encoding, at most ``n``) and the Animator (its specs and sample path);
+    ``audio``: the speech, which only "samples, audio target" hears."""
     from ..pipeline.animator import Animator
     from ..selection import plan
 
     keep, plan.JOIN_FRAMES = plan.JOIN_FRAMES, JOINS.get(method, plan.JOIN_FRAMES)
     try:
-        anim = Animator(bank, timeline, fps=fps, samples="on" if method.startswith("samples") else "off")
+        anim = Animator(bank, timeline, fps=fps, samples="on" if method.startswith("samples") else "off",
+                        audio=audio if method == "samples, audio target" else None)
     finally:
         plan.JOIN_FRAMES = keep
     n = len(anim) if n is None else min(n, len(anim))
@@ -116,7 +131,8 @@ def render_method(bank, timeline, fps: float, method: str, n: Optional[int] = No
 
 def _frames(bank, clip: str, method: str) -> tuple:
     """GRID ``clip``'s frames rendered by ``method`` from its alignment, and the Animator."""
-    return render_method(bank, grid.alignment_of(clip).phones, grid.track(clip).fps, method, len(grid.track(clip)))
+    return render_method(bank, grid.alignment_of(clip).phones, grid.track(clip).fps, method, len(grid.track(clip)),
+                         audio=grid.video(clip))
 
 
 def inner_box(points: np.ndarray, shape) -> Tuple[int, int, int, int]:
@@ -411,19 +427,21 @@ def _dub_rows(ctx: Context, bank, pairs, mesh, rows: List[dict]) -> None:
     from ..selection import plan
 
     closures = set(load_map(DEFAULT_MAP).closures)
-    methods = {m: m for m in METHODS[:3]}
+    methods = {m: m for m in METHODS[:4]}
     got: Dict[str, Dict[str, list]] = {"input": {}, **{m: {} for m in methods}}
     for a, b in pairs:
         fps = grid.track(b).fps
         real_open = grid.real_measures(b)["opening"]
         anim = Animator(bank, grid.alignment_of(b).phones, fps=fps, samples="off")  # the same schedule as dub's
-        joins = SamplePath(bank_samples(bank, "on"), anim.specs, anim.phones, anim.fps, anim.pmap, bank.rest,
-                           timing=anim.timing).selection.joins  # dub's own selection (the plan does not change it)
+        # dub's own selections, with and without the speech (the plan does not change them)
+        joins, heard_joins = (SamplePath(bank_samples(bank, "on"), anim.specs, anim.phones, anim.fps, anim.pmap,
+                                         bank.rest, timing=anim.timing, audio=audio).selection.joins
+                              for audio in (None, grid.video(b)))
         for m, method in methods.items():
             out = ctx.tmp / f"dub-{a}-{b}.mp4"
             keep, plan.JOIN_FRAMES = plan.JOIN_FRAMES, JOINS.get(method, plan.JOIN_FRAMES)
             try:
-                with warnings.catch_warnings():
+                with warnings.catch_warnings(), phones_target(method != "samples, audio target"):
                     warnings.simplefilter("ignore")
                     dub(grid.video(a), grid.video(b), out, text=grid.transcript(b), bank=bank, quiet=True,
                         cache=ctx.tmp / "dub-cache", samples="on" if method.startswith("samples") else "off")
@@ -431,7 +449,8 @@ def _dub_rows(ctx: Context, bank, pairs, mesh, rows: List[dict]) -> None:
                 plan.JOIN_FRAMES = keep
             frames = [np.array(f) for f in read_video(out)]
             got_m = _measure(frames, anim, fps, mesh, real_open, closures,
-                             joins if method.startswith("samples") else None)
+                             None if not method.startswith("samples") else
+                             heard_joins if method == "samples, audio target" else joins)
             got_m.pop("points")
             for k, v in got_m.items():
                 got[m].setdefault(k, []).append(v)
@@ -443,6 +462,72 @@ def _dub_rows(ctx: Context, bank, pairs, mesh, rows: List[dict]) -> None:
             got["input"].setdefault(k, []).append(v)
         got["input"].setdefault("clip", []).append([b] * len(inp["features"]))
     _quality_rows("dub", got, None, "input", rows, len(pairs))
+
+
+@contextlib.contextmanager
+def phones_target(on: bool = True):
+    """While on, the selection ignores the speech's prediction (today's target from the phones
+    alone), though the dub hands it the sound."""
+    from ..selection import select as S
+
+    keep = S.AUDIO_SHARE, S.AUDIO_OPEN_WEIGHT
+    if on:
+        S.AUDIO_SHARE, S.AUDIO_OPEN_WEIGHT = (0.0, 0.0), 1.0
+    try:
+        yield
+    finally:
+        S.AUDIO_SHARE, S.AUDIO_OPEN_WEIGHT = keep
+
+
+def target_rows(bank, clips: List[str], rows: List[dict]) -> None:
+    """Lip-opening r against the real speaker without rendering: of the speech's prediction
+    alone, of the phones' target and the audio target, of the samples each selects (their
+    stored openings, and blended across joins by the frame plan's alpha as a render morphs
+    them: ``joins_blended_r``); and
+    an oracle (the real opening itself as the target: what the selection can reach)."""
+    from ..motion.coarticulation import DominanceParams
+    from ..pipeline.animator import Animator
+    from ..pipeline.samplepath import _selector, bank_samples, speech_prediction
+    from ..selection import frame_plan
+    from ..selection import select as S
+
+    samples = bank_samples(bank, "on")
+    got: Dict[str, list] = {}
+    for clip in clips:
+        anim = Animator(bank, grid.alignment_of(clip).phones, fps=grid.track(clip).fps, samples="off")
+        params = anim.timing if isinstance(anim.timing, DominanceParams) else None
+        sel = _selector(samples, anim.pmap, bank.rest)
+        real = grid.real_measures(clip)
+        pred = speech_prediction(samples, grid.video(clip), anim.fps, len(anim.specs))
+        n = min(len(real["opening"]), len(anim.specs))
+        oracle = np.c_[np.nan_to_num(real["opening"][:n], nan=float(np.nanmedian(real["opening"]))),
+                       np.nan_to_num(real["width"][:n], nan=float(np.nanmedian(real["width"])))]
+        r = lambda x: grid.correlation(x[:n], real["opening"][:n])
+        got.setdefault("prediction", []).append(r(pred[:, 0]))
+        for name, audio, share in (("phones", None, S.AUDIO_SHARE), ("audio", pred, S.AUDIO_SHARE),
+                                   ("oracle", oracle, (1.0, 1.0))):
+            keep = S.AUDIO_SHARE, S.AUDIO_GAIN
+            S.AUDIO_SHARE, S.AUDIO_GAIN = share, (S.AUDIO_GAIN if name == "audio" else 1.0)
+            try:
+                s = sel.select(anim.specs, anim.phones, anim.fps, params, audio=audio)
+            finally:
+                S.AUDIO_SHARE, S.AUDIO_GAIN = keep
+            got.setdefault(name + " target", []).append(r(s.target.opening))
+            got.setdefault(name + " selected", []).append(r(samples.opening[s.samples]))
+            src, dst, alpha = frame_plan(s.samples, sel.succ, s.target.closed | s.target.rest)
+            got.setdefault(name + " planned", []).append(r((1 - alpha) * samples.opening[src] +
+                                                           alpha * samples.opening[dst]))
+            got.setdefault(name + " runs", []).append(s.runs())
+    m = {k: round(float(np.mean(v)), 3) for k, v in got.items()}
+    case = f"({len(clips)} held-out sentences, no render)"
+    rows.append({"figure": "samples", "case": f"target: the speech's prediction alone {case}",
+                 "lip_r": m["prediction"]})
+    for name, what in (("phones", "today's target (phones, pictures)"),
+                       ("audio", f"audio target (share {S.AUDIO_SHARE[0]} of the prediction)"),
+                       ("oracle", "oracle target (the real opening and width)")):
+        rows.append({"figure": "samples", "case": f"target: {what} {case}", "target_r": m[name + " target"],
+                     "selected_r": m[name + " selected"], "joins_blended_r": m[name + " planned"],
+                     "mean_run_frames": round(m[name + " runs"], 2)})
 
 
 def _stage_rows(bank, rows: List[dict]) -> None:
@@ -612,6 +697,7 @@ def samples_figures(ctx: Context, rows: List[dict]) -> None:
     _stage_rows(bank, rows)
     _selection_rows(bank, rows)
     judged = held[:TUNED_FROM]  # the selection's weights were chosen on the rest
+    target_rows(bank, judged, rows)
     _render_rows(ctx, bank, judged[:6] if ctx.quick else judged, mesh, rows)
     pairs = list(zip(judged[0::2], judged[1::2]))[: 3 if ctx.quick else 10]
     _dub_rows(ctx, bank, pairs, mesh, rows)
