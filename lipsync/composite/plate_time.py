@@ -222,7 +222,7 @@ class PlateTimes:
         """The allowed joins out of frame ``i``: ``[(j, cost), ...]`` (do not modify it)."""
         # Planning asks the same few hundred frames for their joins at every run of a long
         # clip or session; sorting each time was over half of the planning (a session told
-        # the clock is an hour in planned for ~45 s).
+        # the clock is an hour in planned for ~19 s).
         got = self._joins.get(i)
         if got is None:
             got = self._joins[i] = self._joins_of(i)
