@@ -11,6 +11,9 @@ Usage (from the repository root)::
 
     .venv/bin/python tools/make_grid_bank.py            # rewrites visemes/grid-s1/
     .venv/bin/python tools/make_grid_bank.py /tmp/grid  # or writes elsewhere
+    .venv/bin/python tools/make_grid_bank.py --lip-model-only   # only (re)fit the audio lip
+        # model into visemes/grid-s1/samples.npz (lipsync.samples.lipmodel; what init --video
+        # now fits when it writes the samples), the rest of the bank left as it is
 """
 
 from __future__ import annotations
@@ -69,5 +72,30 @@ def make(out: Path) -> int:
     return 0
 
 
+def lip_model_only(out: Path) -> int:
+    """Fit the audio lip model on the bank's own sentences' sound and write it into its samples table."""
+    import io
+    import os
+
+    import numpy as np
+
+    from lipsync.samples import read_table
+    from lipsync.samples.lipmodel import ARRAYS, fit_clips
+
+    path = out / "samples.npz"
+    table = {k: v for k, v in read_table(path).items() if k not in dict(ARRAYS)}
+    model = fit_clips([grid.video(Path(str(c)).stem) for c in table["clips"]], table["fps"].tolist(), table)
+    table.update(model.arrays())
+    buf = io.BytesIO()
+    np.savez_compressed(buf, **table)
+    tmp = path.with_suffix(".npz.tmp")
+    tmp.write_bytes(buf.getvalue())
+    os.replace(tmp, path)
+    read_table(path)
+    return 0
+
+
 if __name__ == "__main__":
-    sys.exit(make(Path(sys.argv[1]) if len(sys.argv) > 1 else ROOT / "visemes" / "grid-s1"))
+    args = [a for a in sys.argv[1:] if a != "--lip-model-only"]
+    target = Path(args[0]) if args else ROOT / "visemes" / "grid-s1"
+    sys.exit(lip_model_only(target) if "--lip-model-only" in sys.argv else make(target))

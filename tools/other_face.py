@@ -19,13 +19,25 @@ Fetch and run them with::
     python tools/other_face.py pkg/usr/share/kphotoalbum/demo/movie.avi
 
 The script crops the webcam (``--crop W:H:X:Y``, ffmpeg's order), makes a bank with
-``lipsync init --video`` (words recognised: no transcript comes with the clip), renders
-``samples/hello.wav`` with it and with ``visemes/grid-s1``, runs the face mesh on the
-decoded frames and prints: the bank's timing and warnings, each picture's lip opening, the
-rendered mouth's opening inside and outside the words and on P/B/M frames, and how still
-the rendered head is (eye-centre drift and per-frame steps, in eye distances) next to the
-GRID bank's render of the same speech. Then (issue 28) ``lipsync dub`` re-voices the clip
-itself with the same speech and the same figures are printed for the dub.
+``lipsync init --video`` (words recognised: no transcript comes with the clip; its mouth
+samples included), prints the bank's timing, warnings and each picture's lip opening, then
+(issue 35) renders ``samples/hello.wav`` on the bank's plate and dubs it onto the clip itself
+(:func:`lipsync.dub`) each way of :data:`lipsync.bench.samples.METHODS` -- samples with
+joins morphed, samples with joins cut, ``--samples off`` (the one-picture morph), hard cuts
+(render only) -- encodes as the product does and, with the face mesh on the decoded frames,
+prints against the clip's own frames (re-encoded the same way; a dub: frame for frame):
+
+* **sharpness**: median variance of the Laplacian of the mouth box
+  (:func:`lipsync.bench.videobank.mouth_sharpness`), and of the lips' box without the
+  samples' mask edge (:func:`lipsync.bench.samples.lip_sharpness`), before and after encoding;
+* **range** (the opening's standard deviation over the clip's), **pops** (p99 grey change
+  above the nose over the clip's), **P/B/M** (share of closure frames whose opening is at
+  most :data:`lipsync.selection.select.CLOSED`, and the largest opening on them);
+* **join step**: the mouth box's p99 change into a new run of samples over the clip's own
+  p99 frame-to-frame change (:func:`lipsync.bench.samples.join_steps`).
+
+``--sheets DIR`` writes full-size mouth crops of the frames around the largest joins
+(``join-*.png``: before, the join, after; samples with joins morphed above, cut below).
 """
 
 from __future__ import annotations
@@ -37,63 +49,184 @@ import sys
 import tempfile
 import warnings
 from pathlib import Path
+from typing import Dict, List, Optional
 
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-# MediaPipe mesh points of the outer eye corners (the stabiliser's still points include them).
-EYE_CORNERS = (33, 263)
+sys.path.insert(0, str(ROOT))
 
 
 def _run(args) -> None:
     subprocess.run(args, check=True)
 
 
-def _render_stats(video: Path, bank_dir: Path) -> dict:
-    from lipsync import Animator, Bank
+from lipsync.bench.samples import METHODS  # noqa: E402  (the tool runs from the repository)
+
+#: The dub's ways (hard cuts is a render-only baseline).
+DUB_METHODS = METHODS[:3]
+
+
+def _decoded(path: Path) -> List[np.ndarray]:
+    from lipsync.face.video import read_video
+
+    return [np.array(f) for f in read_video(path)]
+
+
+def _measures(frames, fps: float, mesh, specs=None, closures=(), joins=None) -> dict:
+    """The face mesh through ``frames`` and what the figures read off it."""
+    from lipsync.bench import grid
+    from lipsync.bench.samples import box_steps, join_steps, lip_sharpness
+    from lipsync.bench.videobank import _closure_frames, mouth_sharpness
     from lipsync.face import measure as M
     from lipsync.face.track import track_frames
-    from lipsync.face.video import read_video
-    from lipsync.phonetics.phonemes import DEFAULT_MAP, load_map
 
-    from lipsync.face.video import probe_video
+    tr = track_frames(frames, fps=fps, mesh=mesh)
+    opening = M.lip_opening(tr.points)
+    steps = box_steps(frames, tr.points)
+    n = len(frames) if specs is None else min(len(frames), len(specs))
+    shut = (_closure_frames(specs[:n], set(closures)) & np.isfinite(opening[:n])) if specs is not None else None
+    return {"found": float(tr.found.mean()), "opening": opening, "sharp": mouth_sharpness(frames, tr.points),
+            "lips": lip_sharpness(frames, tr.points), "steps": steps,
+            "pops": grid.above_nose_pops(frames, tr.points) if tr.found.any() else float("nan"),
+            "shut": None if shut is None else opening[:n][shut],
+            "joins": None if joins is None else join_steps(steps, np.asarray(joins, bool)[:len(steps)])}
 
-    fps = probe_video(video).fps  # a dub keeps the clip's own rate
-    frames = list(read_video(video))
-    points = track_frames(frames, fps=fps, smooth=False).points
-    opening = M.lip_opening(points)
+
+def _row(got: dict, ref: dict, raw: Optional[dict] = None) -> dict:
+    """``got``'s figures over the reference's (``raw``: the same frames before encoding)."""
+    from lipsync.selection.select import CLOSED
+
+    def med(x):
+        return float(np.nanmedian(x))
+
+    row = {"face found": round(got["found"], 3),
+           "sharpness": round(med(got["sharp"]) / med(ref["sharp"]), 3),
+           "lips' sharpness": round(med(got["lips"]) / med(ref["lips"]), 3)}
+    if raw is not None:
+        row["lips' sharpness before encoding"] = round(med(raw["lips"]) / med(ref["lips"]), 3)
+    row["range"] = round(float(np.nanstd(got["opening"]) / np.nanstd(ref["opening"])), 3)
+    row["pops"] = round(got["pops"] / ref["pops"], 2)
+    if got["shut"] is not None and len(got["shut"]):
+        row["P/B/M closed"] = round(float((got["shut"] <= CLOSED).mean()), 3)
+        row["P/B/M max opening"] = round(float(np.nanmax(got["shut"])), 3)
+    if got["joins"] is not None and np.isfinite(got["joins"]).any():
+        row["join step p99"] = round(float(np.nanpercentile(got["joins"], 99)) / float(
+            np.nanpercentile(ref["steps"], 99)), 2)
+        row["joins"] = int(np.isfinite(got["joins"]).sum())
+    return row
+
+
+def _timeline(bank, fps: float):
+    """hello.wav's phones (aligned once) and the sequencer's frames on ``bank``."""
+    from lipsync import Animator
+
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        anim = Animator.from_audio(Bank.load(bank_dir), ROOT / "samples" / "hello.wav",
-                                   (ROOT / "samples" / "hello.lab").read_text(), fps=fps)
-    speech = np.zeros(len(frames), bool)
-    for w in anim.alignment.words:
-        speech[int(w.start * anim.fps):int(np.ceil(w.end * anim.fps))] = True
-    closures = set(load_map(DEFAULT_MAP).closures)     # both banks are made with the default map
-    closed = [i for i, f in enumerate(anim.specs[:len(frames)]) if f.shown in closures]
-    eyes = points[:, list(EYE_CORNERS)].mean(axis=1)
-    iod = float(np.nanmedian(np.linalg.norm(points[:, EYE_CORNERS[0]] - points[:, EYE_CORNERS[1]], axis=1)))
-    drift = np.linalg.norm(eyes - np.nanmedian(eyes, axis=0), axis=1) / iod
-    step = np.linalg.norm(np.diff(eyes, axis=0), axis=1) / iod
-    return {"face found": float(np.isfinite(opening).mean()),
-            "opening in words (median)": round(float(np.nanmedian(opening[speech])), 3),
-            "opening outside (median)": round(float(np.nanmedian(opening[~speech])), 3),
-            "P/B/M frames": len(closed),
-            "opening on P/B/M (max)": round(float(np.nanmax(opening[closed])), 3) if closed else None,
-            "eye-centre drift p95 (eye distances)": round(float(np.nanpercentile(drift, 95)), 3),
-            "per-frame step p95 (eye distances)": round(float(np.nanpercentile(step, 95)), 3),
-            "eye distance px": round(iod, 1)}
+        anim = Animator.from_audio(bank, ROOT / "samples" / "hello.wav", (ROOT / "samples" / "hello.lab").read_text(),
+                                   fps=fps, samples="off")
+    return anim.alignment.phones, anim
+
+
+def _renders(bank, clip: Path, tmp: Path, mesh, closures, sheets: Optional[Path]) -> tuple:
+    """hello.wav rendered on the bank's plate each way: the rows (against the clip's own
+    frames) and the clip's own measures."""
+    from lipsync.bench.samples import _encoded, render_method
+    from lipsync.face.video import probe_video
+
+    fps = probe_video(clip).fps
+    ref = _measures(_encoded(_decoded(clip), tmp, fps), fps, mesh)
+    phones, base = _timeline(bank, fps)
+    rows, shown = {}, {}
+    for m in METHODS:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            frames, anim = render_method(bank, phones, fps, m)
+        sp = anim.sample_path
+        joins = None if sp is None else sp.selection.joins
+        got = _measures(_encoded(frames, tmp, fps), fps, mesh, anim.specs, closures, joins)
+        rows[f"render: {m}"] = _row(got, ref, _measures(frames, fps, mesh))
+        shown[m] = (frames, joins)
+    if sheets is not None:
+        _join_sheets(shown, mesh, fps, sheets)
+    return rows, ref
+
+
+def _dubs(bank_dir: Path, clip: Path, tmp: Path, mesh, closures, ref: dict) -> Dict[str, dict]:
+    """The clip re-voiced with hello.wav each way (its own bank), frame for frame against its own frames."""
+    from lipsync import Animator, Bank
+    from lipsync.face.video import probe_video
+    from lipsync.pipeline.dubbing import dub
+    from lipsync.pipeline.samplepath import SamplePath, bank_samples
+    from lipsync.selection import plan
+    from lipsync.bench.samples import JOINS
+
+    bank = Bank.load(bank_dir)
+    fps = probe_video(clip).fps
+    phones, _ = _timeline(bank, fps)
+    anim = Animator(bank, phones, fps=fps, samples="off", still=True)
+    s = bank_samples(bank, "on")
+    joins = None if s is None else SamplePath(s, anim.specs, anim.phones, anim.fps, anim.pmap, bank.rest,
+                                              timing=anim.timing).selection.joins
+    rows = {}
+    for m in DUB_METHODS:
+        out = tmp / "dub.mp4"
+        keep, plan.JOIN_FRAMES = plan.JOIN_FRAMES, JOINS.get(m, plan.JOIN_FRAMES)
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                dub(clip, ROOT / "samples" / "hello.wav", out, text=(ROOT / "samples" / "hello.lab").read_text(),
+                    bank=bank, quiet=True, cache=tmp / "cache", samples="on" if m.startswith("samples") else "off")
+        finally:
+            plan.JOIN_FRAMES = keep
+        frames = _decoded(out)
+        n = len(frames)
+        own = {k: (v[:n] if isinstance(v, np.ndarray) and k in ("sharp", "lips", "opening") else v)
+               for k, v in ref.items()}  # the same frames of the input
+        got = _measures(frames, fps, mesh, anim.specs, closures, joins if m.startswith("samples") else None)
+        rows[f"dub: {m}"] = _row(got, own)
+    return rows
+
+
+def _join_sheets(shown: dict, mesh, fps: float, out: Path) -> None:
+    """Full-size mouth crops around the three joins whose step is largest when cut."""
+    import cv2
+
+    from lipsync.bench.samples import box_steps
+    from lipsync.face.compare import mouth_box
+    from lipsync.face.track import track_frames
+
+    out.mkdir(parents=True, exist_ok=True)
+    cut, joins = shown["samples, joins cut"]
+    morphed = shown["samples, joins morphed"][0]
+    pts = track_frames(cut, fps=fps, mesh=mesh).points
+    steps = box_steps(cut, pts)
+    at = [t for t in np.nonzero(joins[:len(steps)])[0] if 1 <= t < len(cut) - 1 and np.isfinite(steps[t])]
+    for t in sorted(at, key=lambda t: -steps[t])[:3]:
+        x0, y0, x1, y1 = mouth_box(pts[t], cut[t].shape[:2])
+        rows = [np.concatenate([f[k][y0:y1, x0:x1] for k in (t - 1, t, t + 1)], axis=1) for f in (morphed, cut)]
+        sheet = np.concatenate(rows, axis=0)
+        sheet = cv2.resize(sheet, None, fx=3, fy=3, interpolation=cv2.INTER_NEAREST)  # pixels shown as they are
+        cv2.imwrite(str(out / f"join-{t:04d}.png"), np.ascontiguousarray(sheet[..., ::-1]))
+
+
+def _print(rows: Dict[str, dict]) -> None:
+    for name, row in rows.items():
+        print(f"  {name:32s}", "  ".join(f"{k} {v}" for k, v in row.items()))
 
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("video", type=Path)
     ap.add_argument("--crop", help="W:H:X:Y of the face's part of the picture (ffmpeg crop)")
+    ap.add_argument("--sheets", type=Path, help="write mouth crops around the largest joins here")
     args = ap.parse_args(argv)
     import imageio_ffmpeg
 
     from lipsync import Bank
     from lipsync.bench.coarticulation import bank_values
+    from lipsync.face.landmarks import FaceMesh
+    from lipsync.phonetics.phonemes import DEFAULT_MAP, load_map
 
     ffmpeg = imageio_ffmpeg.get_ffmpeg_exe()
     with tempfile.TemporaryDirectory() as tmp:
@@ -102,28 +235,21 @@ def main(argv=None) -> int:
         crop = ["-vf", f"crop={args.crop}"] if args.crop else []
         _run([ffmpeg, "-loglevel", "error", "-y", "-i", str(args.video), *crop, "-c:v", "libx264", "-crf", "16",
               "-c:a", "aac", str(clip)])
-        bank = tmp / "bank"
-        lipsync = [sys.executable, "-m", "lipsync"]
-        _run([*lipsync, "init", str(bank), "--video", str(clip), "-q"])
-        rep = json.loads((bank / "init-report.json").read_text())
+        bank_dir = tmp / "bank"
+        _run([sys.executable, "-m", "lipsync", "init", str(bank_dir), "--video", str(clip), "-q"])
+        rep = json.loads((bank_dir / "init-report.json").read_text())
+        bank = Bank.load(bank_dir)
         print("bank:", {"seconds": round(sum(rep["seconds"].values()), 1), "size": rep["size"],
                "words recognised": " ".join(rep["videos"][0]["words"]), "missing": rep["missing"],
-               "symmetry": rep["symmetry"]})
-        print("pictures' lip opening:", {k: round(v, 3) for k, v in bank_values(Bank.load(bank)).items()})
-        for name, b in (("this face", bank), ("visemes/grid-s1", ROOT / "visemes" / "grid-s1")):
-            out = tmp / f"{name.replace('/', '-')}.mp4"
-            _run([*lipsync, "render", str(ROOT / "samples" / "hello.wav"), "--text", str(ROOT / "samples" / "hello.lab"),
-                  "--bank", str(b), "-o", str(out), "-q"])
-            print(f"hello.wav rendered with {name}:", _render_stats(out, b))
-        # issue 28: the clip itself re-voiced with hello.wav (its own frames, its bank made by dub)
-        out = tmp / "dub.mp4"
-        proc = subprocess.run([*lipsync, "dub", str(clip), "--audio", str(ROOT / "samples" / "hello.wav"), "--text",
-                               str(ROOT / "samples" / "hello.lab"), "-o", str(out), "--cache", str(tmp / "cache")],
-                              capture_output=True, text=True)
-        said = [line for line in proc.stderr.splitlines() if "warning" in line or "error" in line or "wrote" in line]
-        print("lipsync dub (exit", proc.returncode, "):", " | ".join(said)[:600])
-        if proc.returncode == 0:
-            print("hello.wav dubbed onto the clip:", _render_stats(out, bank))
+               "symmetry": rep["symmetry"], "samples": None if bank.samples is None else
+               int(np.load(bank.samples.table)["clip"].shape[0])})
+        print("pictures' lip opening:", {k: round(v, 3) for k, v in bank_values(bank).items()})
+        mesh = FaceMesh()
+        closures = load_map(DEFAULT_MAP).closures  # the bank is made with the default map
+        rows, ref = _renders(bank, clip, tmp, mesh, closures, args.sheets)
+        rows.update(_dubs(bank_dir, clip, tmp, mesh, closures, ref))
+        print("against the clip's own frames (re-encoded as the product encodes):")
+        _print(rows)
     return 0
 
 

@@ -3,26 +3,42 @@
 A bank is made from GRID's :data:`~lipsync.bench.grid.BANK_CLIPS` (three in ``--quick``)
 with its samples; the held-out sentences (:func:`~lipsync.bench.grid.held_out`) are
 
-* **rendered** from their own alignment on the bank's plate three ways from the same bank
-  and cues — **samples** (``--samples on``), **old morph** (``--samples off``, one picture
-  per viseme, the flow morph) and **hard cuts** (the nearer picture, no morph) — each
-  encoded as ``lipsync render`` encodes (H.264, crf 18, talking-head) and decoded;
+* **rendered** from their own alignment on the bank's plate each way of :data:`METHODS`
+  from the same bank and cues — **samples** (``--samples on``) with joins morphed over one
+  frame and with joins cut (:data:`lipsync.selection.plan.JOIN_FRAMES` 1 and 0), **old
+  morph** (``--samples off``, one picture per viseme, the flow morph) and **hard cuts**
+  (the nearer picture, no morph) — each encoded as ``lipsync render`` encodes (H.264, crf
+  18, talking-head) and decoded;
 * **dubbed**: held-out video A re-voiced with held-out B's sound and transcript
-  (:func:`lipsync.dub`, the same bank, samples on and off).
+  (:func:`lipsync.dub`, the same bank: samples with joins morphed, cut, and off).
 
 Measured on the decoded frames (the face mesh tracked through them): **lip r** (inner-lip
 opening against B's real frames, mean over sentences), **sharpness** (median variance of
 the Laplacian of the mouth box, :func:`lipsync.bench.videobank.mouth_sharpness`) over the
-real frames' (render) or the input video's (dub), **closed** (share of frames the sequencer
+real frames' (render) or the input video's (dub), and the same of the lips' own box
+(:func:`lip_sharpness`: the mouth box reaches the samples' mask edge and, below it, the
+plate's chin, which is the plate's sharpness, not the mouth's), **closed** (share of frames the sequencer
 shows a P/B/M closure whose tracked opening is at most
 :data:`lipsync.selection.select.CLOSED`), **range** (standard deviation of the opening over
 the real one's), **pops** (99th percentile of the grey change above the nose over the
-real clips'), and a **detector AUC**: logistic regression (numpy, :func:`logistic_auc`) on
+real clips'), the **join step** (the mouth box's p99 change into a new run of samples,
+:func:`join_steps`, over the real frames' p99 change), and a **detector AUC**: logistic regression (numpy, :func:`logistic_auc`) on
 HOG and Laplacian-histogram features of 64x48 mouth crops, real frames re-encoded the
 same way, cross-validated by sentence (0.5: cannot tell them apart).
 
-Sharpness per stage: the source crops (the footage's mouth box), the crops as stored
-(``samples.mp4`` decoded), the frames as pasted (before encoding), as encoded.
+**Target** rows (no render, the same held-out sentences): lip r of the bank's audio lip
+model's prediction alone (:mod:`lipsync.samples.lipmodel`), of the phones' target and of
+the audio target, of the samples each selects, and of an oracle target (the real opening
+as the target: what the selection could reach with a perfect prediction). **samples, audio
+target** renders and dubs with the speech's prediction in the target (what ``lipsync render
+AUDIO`` and ``lipsync dub`` do, joins as :data:`lipsync.selection.plan.JOIN_FRAMES` says);
+the other sample methods select for the phones' target alone. The dubs' speech is another
+GRID s1 sentence, so the voice is the bank's own speaker's.
+
+Sharpness per stage: the source crops (the footage's mouth box) against the crops as
+stored (``samples.mp4`` decoded); then, in the lips' box over the held-out real frames, the
+bank's footage (what the samples are cut from), the plate under the render, each method
+before and after encoding (:func:`_stage_sharpness_row`).
 
 Cost: selection seconds per second of speech (a 10-minute timeline of held-out alignments
 joined), CPU per frame (``time.thread_time``) of today's frame and of a samples frame at
@@ -33,23 +49,34 @@ the bank's size on disk.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import subprocess
 import sys
 import time
 import warnings
 from pathlib import Path
-from typing import Dict, List
+from typing import Dict, List, Optional, Tuple
 
 import numpy as np
 
 from . import FIGURES, Context
 from . import grid
 
-#: The renderings compared, in the order printed.
-METHODS = ("samples", "samples, joins cut", "old morph", "hard cuts")
+#: The renderings compared, in the order printed: "samples, audio target" selects for the
+#: target the speech's own sound moves (the bank's audio lip model); the other sample
+#: methods for the phones' target alone (lipsync.selection.select.AUDIO_SHARE 0).
+METHODS = ("samples, audio target", "samples, joins morphed", "samples, joins cut", "old morph", "hard cuts")
+#: lipsync.selection.plan.JOIN_FRAMES of the sample methods (each set explicitly, whatever the default).
+JOINS = {"samples, joins morphed": 1, "samples, joins cut": 0}
+#: :func:`inner_box`'s margins (eye distances: side, up, down) around the outer lips. The
+#: mouth box (lipsync.face.compare.mouth_box: 0.25, 0.2, 0.45) reaches the samples' mask edge
+#: (GRID s1: 38% of its pixels within 2 px of the feather, where plate and sample meet); these
+#: stay inside the mask's solid part, so the seam is not counted as sharpness.
+INNER_MARGIN = (0.1, 0.1, 0.15)
 #: Held-out sentences from this index on tuned the selection (lipsync.selection.select.WEIGHTS,
-#: TARGET_GAIN, lipsync.selection.plan.JOIN_FRAMES on [24:30]; PICTURE_SHARE on [18:30]): the
+#: TARGET_GAIN, lipsync.selection.plan.JOIN_FRAMES on [24:30]; PICTURE_SHARE, AUDIO_SHARE,
+#: AUDIO_GAIN, AUDIO_OPEN_WEIGHT and lipsync.samples.lipmodel.CONTEXT on [18:30]): the
 #: figure judges on the ones before.
 TUNED_FROM = 18
 #: Mouth crops the detector sees: (W, H) grey.
@@ -76,20 +103,20 @@ def _encoded(frames, tmp: Path, fps: float) -> List[np.ndarray]:
     return out
 
 
-def _frames(bank, clip: str, method: str) -> tuple:
-    """Clip's frames rendered by ``method``, and the Animator (its specs and selection)."""
+def render_method(bank, timeline, fps: float, method: str, n: Optional[int] = None, audio=None) -> tuple:
+    """``timeline`` rendered by ``method`` (one of :data:`METHODS`) onto ``bank``'s plate: the
+    frames (before encoding, at most ``n``) and the Animator (its specs and sample path);
+    ``audio``: the speech, which only "samples, audio target" hears."""
     from ..pipeline.animator import Animator
-
     from ..selection import plan
 
-    fps = grid.track(clip).fps
-    keep, plan.JOIN_FRAMES = plan.JOIN_FRAMES, 0 if method == "samples, joins cut" else plan.JOIN_FRAMES
+    keep, plan.JOIN_FRAMES = plan.JOIN_FRAMES, JOINS.get(method, plan.JOIN_FRAMES)
     try:
-        anim = Animator(bank, grid.alignment_of(clip).phones, fps=fps,
-                        samples="on" if method.startswith("samples") else "off")
+        anim = Animator(bank, timeline, fps=fps, samples="on" if method.startswith("samples") else "off",
+                        audio=audio if method == "samples, audio target" else None)
     finally:
         plan.JOIN_FRAMES = keep
-    n = min(len(anim), len(grid.track(clip)))
+    n = len(anim) if n is None else min(n, len(anim))
     if method == "hard cuts":
         out = []
         for i in range(n):
@@ -100,6 +127,90 @@ def _frames(bank, clip: str, method: str) -> tuple:
             out.append(anim.plate.compositor.apply_prepared(mouth, buf, anim.plate._prepared[j]))
         return out, anim
     return [anim.frame(i).copy() for i in range(n)], anim
+
+
+def _frames(bank, clip: str, method: str) -> tuple:
+    """GRID ``clip``'s frames rendered by ``method`` from its alignment, and the Animator."""
+    return render_method(bank, grid.alignment_of(clip).phones, grid.track(clip).fps, method, len(grid.track(clip)),
+                         audio=grid.video(clip))
+
+
+def inner_box(points: np.ndarray, shape) -> Tuple[int, int, int, int]:
+    """``(x0, y0, x1, y1)``: the outer lips' box widened by :data:`INNER_MARGIN` eye distances
+    (side, up, down), inside ``shape``: the mouth without the samples' mask edge.
+
+    Examples
+    --------
+    >>> x0, y0, x1, y1 = inner_box(np.tile([[50.0, 50.0]], (478, 1)), (100, 100))
+    >>> (x0, y0) == (50, 50) and x1 == y1 == 51            # no eye distance: the lips' own box
+    True
+    """
+    from ..face import topology as T
+    from ..face.compare import eye_centres
+
+    p = np.asarray(points, np.float64)[:, :2]
+    lips = p[list(T.LIP_OUTER_UPPER + T.LIP_OUTER_LOWER)]
+    a, b = eye_centres(p)
+    d = float(np.linalg.norm(b - a))
+    side, up, down = INNER_MARGIN
+    h, w = shape[:2]
+    x0, x1 = int(np.floor(lips[:, 0].min() - side * d)), int(np.ceil(lips[:, 0].max() + side * d)) + 1
+    y0, y1 = int(np.floor(lips[:, 1].min() - up * d)), int(np.ceil(lips[:, 1].max() + down * d)) + 1
+    return max(0, x0), max(0, y0), min(w, x1), min(h, y1)
+
+
+def lip_sharpness(frames, points) -> np.ndarray:
+    """Per frame: variance of the Laplacian of the luma in :func:`inner_box` (NaN without a
+    face): :func:`lipsync.bench.videobank.mouth_sharpness` without the mask's edge."""
+    from ..videobank.select import sharpness
+
+    out = np.full(len(frames), np.nan)
+    for i, (f, p) in enumerate(zip(frames, points)):
+        if np.all(np.isfinite(p)):
+            out[i] = sharpness(f[..., :3], inner_box(p, f.shape[:2]))
+    return out
+
+
+def box_steps(frames, points) -> np.ndarray:
+    """Per frame t: the mean absolute grey change of the mouth box
+    (:func:`lipsync.face.compare.mouth_box` of frame t) from frame t-1 (NaN at 0 or without a face).
+
+    Examples
+    --------
+    >>> from lipsync.face.compare import mouth_box
+    >>> frames = [np.full((60, 60, 3), v, np.uint8) for v in (10, 10, 40)]
+    >>> pts = np.tile([[30.0, 30.0]], (3, 478, 1)); pts[:, :, 0] += np.arange(478) % 3  # a non-empty box
+    >>> box_steps(frames, pts).round(1).tolist()
+    [nan, 0.0, 30.0]
+    """
+    import cv2
+
+    from ..face.compare import mouth_box
+
+    out = np.full(len(frames), np.nan)
+    for t in range(1, len(frames)):
+        p = points[t]
+        if not (np.all(np.isfinite(p)) and np.all(np.isfinite(points[t - 1]))):
+            continue
+        x0, y0, x1, y1 = mouth_box(p, frames[t].shape[:2])
+        a = cv2.cvtColor(np.ascontiguousarray(frames[t - 1][y0:y1, x0:x1, :3]), cv2.COLOR_RGB2GRAY)
+        b = cv2.cvtColor(np.ascontiguousarray(frames[t][y0:y1, x0:x1, :3]), cv2.COLOR_RGB2GRAY)
+        out[t] = float(np.abs(a.astype(np.float32) - b).mean()) if a.size else np.nan
+    return out
+
+
+def join_steps(steps: np.ndarray, joins: np.ndarray) -> np.ndarray:
+    """Per join at frame t (a new run starts): the larger of the box steps into t and t+1 (a
+    cut changes at t, a one-frame morph splits the change over t and t+1).
+
+    Examples
+    --------
+    >>> join_steps(np.array([np.nan, 1, 9, 1, 4, 4]), np.array([0, 0, 1, 0, 1, 0], bool)).tolist()
+    [9.0, 4.0]
+    """
+    n = len(steps)
+    return np.array([np.nanmax(steps[t:min(t + 2, n)]) if np.isfinite(steps[t:min(t + 2, n)]).any() else np.nan
+                     for t in np.nonzero(joins[:n])[0]])
 
 
 def crop_features(frame: np.ndarray, points: np.ndarray) -> np.ndarray:
@@ -168,9 +279,11 @@ def auc(scores: np.ndarray, y: np.ndarray) -> float:
     return float((ranks[pos].sum() - n1 * (n1 + 1) / 2) / max(1, n1 * n0))
 
 
-def _measure(frames, anim, fps: float, mesh, real_open: np.ndarray, closures) -> Dict[str, object]:
+def _measure(frames, anim, fps: float, mesh, real_open: np.ndarray, closures, joins=None) -> Dict[str, object]:
     """What a figure reads off decoded frames: the opening and its r with the real one, mouth
-    sharpness, the opening on the closure frames, the pops, the detector's features."""
+    sharpness (the box's and the lips' own, :func:`lip_sharpness`), the opening on the
+    closure frames, the pops, the mouth box's steps (all frames, and at ``joins``: frames
+    where a new run of samples starts), the detector's features."""
     from ..face import measure as M
     from ..face.track import track_frames
     from ..selection.select import CLOSED
@@ -184,11 +297,14 @@ def _measure(frames, anim, fps: float, mesh, real_open: np.ndarray, closures) ->
             "sharp": mouth_sharpness(frames, tr.points), "closed": opening[shut] <= CLOSED,
             "pops": grid.above_nose_pops(frames, tr.points) if tr.found.any() else np.nan,
             "features": [crop_features(f, p) for f, p, ok in zip(frames, tr.points, tr.found) if ok],
+            "lip_sharp": lip_sharpness(frames, tr.points), "steps": (steps := box_steps(frames, tr.points)),
+            "join_steps": join_steps(steps, np.asarray(joins, bool)[:n]) if joins is not None else np.array([]),
             "points": tr.points}
 
 
 def _render_rows(ctx: Context, bank, clips: List[str], mesh, rows: List[dict]) -> None:
-    """The held-out sentences rendered three ways (and the real frames), one row each."""
+    """The held-out sentences rendered each way of :data:`METHODS` (and the real frames), one
+    row each; then the lips' sharpness per stage (:func:`_stage_sharpness_row`)."""
     from ..face.video import read_video
     from ..phonetics.phonemes import DEFAULT_MAP, load_map
     from .videobank import mouth_sharpness
@@ -196,6 +312,7 @@ def _render_rows(ctx: Context, bank, clips: List[str], mesh, rows: List[dict]) -
     closures = set(load_map(DEFAULT_MAP).closures)
     got: Dict[str, Dict[str, list]] = {m: {} for m in ("real",) + METHODS}
     raw_sharp: Dict[str, list] = {m: [] for m in METHODS}
+    stages: Dict[str, list] = {"plate under the render": [], "real, not re-encoded": []}
     for clip in clips:
         rt = grid.track(clip)
         real_open = grid.real_measures(clip)["opening"]
@@ -204,18 +321,54 @@ def _render_rows(ctx: Context, bank, clips: List[str], mesh, rows: List[dict]) -
         for m in METHODS:
             frames, anim = _frames(bank, clip, m)
             dec = _encoded(frames, ctx.tmp, rt.fps)
-            got_m = _measure(dec, anim, rt.fps, mesh, real_open, closures)
-            raw_sharp[m].append(np.nanmedian(mouth_sharpness(frames, got_m.pop("points"))))
+            sp = anim.sample_path
+            got_m = _measure(dec, anim, rt.fps, mesh, real_open, closures,
+                             None if sp is None else sp.selection.joins)
+            pts = got_m.pop("points")
+            raw_sharp[m].append(np.nanmedian(mouth_sharpness(frames, pts)))
+            stages.setdefault(f"{m}, before encoding", []).append(lip_sharpness(frames, pts))
+            if m == METHODS[0]:
+                plate = [anim.plate.frames[anim.plate.index(i, rt.fps, anim.plate_line)] for i in range(len(frames))]
+                stages["plate under the render"].append(lip_sharpness(plate, pts))
             for k, v in got_m.items():
                 got[m].setdefault(k, []).append(v)
             got[m].setdefault("clip", []).append([clip] * len(got_m["features"]))
         real_m = _measure(_encoded(real, ctx.tmp, rt.fps), anim, rt.fps, mesh, real_open, closures)
         real_m.pop("points")
         real_m["raw_sharp"] = np.nanmedian(mouth_sharpness(real, rt.points))
+        stages["real, not re-encoded"].append(lip_sharpness(real, rt.points))
         for k, v in real_m.items():
             got["real"].setdefault(k, []).append(v)
         got["real"].setdefault("clip", []).append([clip] * len(real_m["features"]))
     _quality_rows("render", got, raw_sharp, "real", rows, len(clips))
+    _stage_sharpness_row(bank, got, stages, rows)
+
+
+def _stage_sharpness_row(bank, got, stages: Dict[str, list], rows: List[dict]) -> None:
+    """The lips' sharpness (:func:`lip_sharpness`: no mask edge) of a render per stage, over
+    the held-out real frames re-encoded: the bank's footage (the samples' and the plate's
+    source frames, as decoded), the plate under the render, each method before and after
+    encoding. GRID's sentences differ among themselves (a sentence's median from 0.5x to
+    1.2x the median of all), so a render is as sharp as the footage it was made from."""
+    from ..face.video import read_video
+    from ..pipeline.samplepath import bank_samples
+
+    ref = float(np.nanmedian(np.concatenate(got["real"]["lip_sharp"])))
+    footage = []
+    for c in [Path(str(v)).stem for v in bank_samples(bank, "on").clips]:
+        if grid.video(c).is_file():
+            footage.append(lip_sharpness([np.array(f) for f in read_video(grid.video(c))], grid.track(c).points))
+    row = {"figure": "samples", "case": "render: the lips' sharpness per stage (over held-out real frames, re-encoded)",
+           "bank_footage": round(float(np.nanmedian(np.concatenate(footage))) / ref, 3) if footage else None}
+    for k, v in stages.items():
+        row[k.replace(", ", " ").replace(" ", "_")] = round(float(np.nanmedian(np.concatenate(v))) / ref, 3)
+    for m in METHODS:
+        row[f"{m} encoded".replace(", ", " ").replace(" ", "_")] = round(
+            float(np.nanmedian(np.concatenate(got[m]["lip_sharp"]))) / ref, 3)
+    per_clip = [float(np.nanmedian(v)) / float(np.nanmedian(np.concatenate(stages["real, not re-encoded"])))
+                for v in stages["real, not re-encoded"]]
+    row["held_out_sentences_spread"] = f"{min(per_clip):.2f}-{max(per_clip):.2f}"
+    rows.append(row)
 
 
 def _quality_rows(what: str, got, raw_sharp, reference: str, rows: List[dict], count: int) -> None:
@@ -223,6 +376,8 @@ def _quality_rows(what: str, got, raw_sharp, reference: str, rows: List[dict], c
     ref = got[reference]
     ref_sharp = float(np.nanmedian(np.concatenate(ref["sharp"])))
     ref_pops = float(np.nanmean(ref["pops"]))
+    ref_lips = float(np.nanmedian(np.concatenate(ref["lip_sharp"])))
+    ref_step = float(np.nanpercentile(np.concatenate(ref["steps"]), 99))
     real_feats = np.array([f for fs in ref["features"] for f in fs])
     real_groups = np.array([c for cs in ref["clip"] for c in cs])
     ref_open = np.concatenate(got[reference].get("real_open", ref["open"]))
@@ -237,20 +392,27 @@ def _quality_rows(what: str, got, raw_sharp, reference: str, rows: List[dict], c
         ok = np.isfinite(opening) & np.isfinite(real_open)
         closed = np.concatenate(g["closed"])
         sharp = float(np.nanmedian(np.concatenate(g["sharp"])))
+        lips = float(np.nanmedian(np.concatenate(g["lip_sharp"]))) / ref_lips
+        jumps = np.concatenate(g["join_steps"]) if g.get("join_steps") else np.array([])
         row = {"figure": "samples", "case": f"{what}: {m} ({count} held-out sentences)",
                "lip_r": round(float(np.nanmean(g["r"])), 3),
                "sharpness_vs_" + reference: round(sharp / ref_sharp, 3),
+               "lips_sharpness_vs_" + reference: round(lips, 3),
                "pbm_closed": round(float(closed.mean()) if closed.size else float("nan"), 3),
                "range": round(float(opening[ok].std() / real_open[ok].std()), 3),
                "pops_over_" + reference: round(float(np.nanmean(g["pops"])) / ref_pops, 2),
                "detector_auc": round(logistic_auc(x, y, groups), 3)}
+        if np.isfinite(jumps).any():  # the mouth box's step into a new run, over the real steps' p99
+            row["join_step_p99_over_" + reference] = round(float(np.nanpercentile(jumps, 99)) / ref_step, 2)
+            row["joins"] = int(np.isfinite(jumps).sum())
         if raw_sharp is not None and m in raw_sharp:
             row["sharpness_before_encoding"] = round(float(np.nanmedian(raw_sharp[m])) / float(
                 np.nanmedian(ref.get("raw_sharp", [ref_sharp]))), 3)
         rows.append(row)
     rows.append({"figure": "samples", "case": f"{what}: {reference} frames, re-encoded",
                  "pbm_closed": round(float(np.concatenate(ref["closed"]).mean()), 3) if "closed" in ref else None,
-                 "mouth_sharpness": round(ref_sharp, 1), "pops_p99": round(ref_pops, 2),
+                 "mouth_sharpness": round(ref_sharp, 1), "lips_sharpness": round(ref_lips, 1),
+                 "pops_p99": round(ref_pops, 2), "box_step_p99": round(ref_step, 2),
                  "open_std": round(float(np.nanstd(ref_open)), 4)})
 
 
@@ -261,20 +423,34 @@ def _dub_rows(ctx: Context, bank, pairs, mesh, rows: List[dict]) -> None:
     from ..pipeline.animator import Animator
     from ..pipeline.dubbing import dub
 
+    from ..pipeline.samplepath import SamplePath, bank_samples
+    from ..selection import plan
+
     closures = set(load_map(DEFAULT_MAP).closures)
-    got: Dict[str, Dict[str, list]] = {"input": {}, "dub samples": {}, "dub old morph": {}}
+    methods = {m: m for m in METHODS[:4]}
+    got: Dict[str, Dict[str, list]] = {"input": {}, **{m: {} for m in methods}}
     for a, b in pairs:
         fps = grid.track(b).fps
         real_open = grid.real_measures(b)["opening"]
         anim = Animator(bank, grid.alignment_of(b).phones, fps=fps, samples="off")  # the same schedule as dub's
-        for m, option in (("dub samples", "on"), ("dub old morph", "off")):
-            out = ctx.tmp / f"dub-{a}-{b}-{option}.mp4"
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
-                dub(grid.video(a), grid.video(b), out, text=grid.transcript(b), bank=bank, quiet=True,
-                    cache=ctx.tmp / "dub-cache", samples=option)
+        # dub's own selections, with and without the speech (the plan does not change them)
+        joins, heard_joins = (SamplePath(bank_samples(bank, "on"), anim.specs, anim.phones, anim.fps, anim.pmap,
+                                         bank.rest, timing=anim.timing, audio=audio).selection.joins
+                              for audio in (None, grid.video(b)))
+        for m, method in methods.items():
+            out = ctx.tmp / f"dub-{a}-{b}.mp4"
+            keep, plan.JOIN_FRAMES = plan.JOIN_FRAMES, JOINS.get(method, plan.JOIN_FRAMES)
+            try:
+                with warnings.catch_warnings(), phones_target(method != "samples, audio target"):
+                    warnings.simplefilter("ignore")
+                    dub(grid.video(a), grid.video(b), out, text=grid.transcript(b), bank=bank, quiet=True,
+                        cache=ctx.tmp / "dub-cache", samples="on" if method.startswith("samples") else "off")
+            finally:
+                plan.JOIN_FRAMES = keep
             frames = [np.array(f) for f in read_video(out)]
-            got_m = _measure(frames, anim, fps, mesh, real_open, closures)
+            got_m = _measure(frames, anim, fps, mesh, real_open, closures,
+                             None if not method.startswith("samples") else
+                             heard_joins if method == "samples, audio target" else joins)
             got_m.pop("points")
             for k, v in got_m.items():
                 got[m].setdefault(k, []).append(v)
@@ -286,6 +462,72 @@ def _dub_rows(ctx: Context, bank, pairs, mesh, rows: List[dict]) -> None:
             got["input"].setdefault(k, []).append(v)
         got["input"].setdefault("clip", []).append([b] * len(inp["features"]))
     _quality_rows("dub", got, None, "input", rows, len(pairs))
+
+
+@contextlib.contextmanager
+def phones_target(on: bool = True):
+    """While on, the selection ignores the speech's prediction (today's target from the phones
+    alone), though the dub hands it the sound."""
+    from ..selection import select as S
+
+    keep = S.AUDIO_SHARE, S.AUDIO_OPEN_WEIGHT
+    if on:
+        S.AUDIO_SHARE, S.AUDIO_OPEN_WEIGHT = (0.0, 0.0), 1.0
+    try:
+        yield
+    finally:
+        S.AUDIO_SHARE, S.AUDIO_OPEN_WEIGHT = keep
+
+
+def target_rows(bank, clips: List[str], rows: List[dict]) -> None:
+    """Lip-opening r against the real speaker without rendering: of the speech's prediction
+    alone, of the phones' target and the audio target, of the samples each selects (their
+    stored openings, and blended across joins by the frame plan's alpha as a render morphs
+    them: ``joins_blended_r``); and
+    an oracle (the real opening itself as the target: what the selection can reach)."""
+    from ..motion.coarticulation import DominanceParams
+    from ..pipeline.animator import Animator
+    from ..pipeline.samplepath import _selector, bank_samples, speech_prediction
+    from ..selection import frame_plan
+    from ..selection import select as S
+
+    samples = bank_samples(bank, "on")
+    got: Dict[str, list] = {}
+    for clip in clips:
+        anim = Animator(bank, grid.alignment_of(clip).phones, fps=grid.track(clip).fps, samples="off")
+        params = anim.timing if isinstance(anim.timing, DominanceParams) else None
+        sel = _selector(samples, anim.pmap, bank.rest)
+        real = grid.real_measures(clip)
+        pred = speech_prediction(samples, grid.video(clip), anim.fps, len(anim.specs))
+        n = min(len(real["opening"]), len(anim.specs))
+        oracle = np.c_[np.nan_to_num(real["opening"][:n], nan=float(np.nanmedian(real["opening"]))),
+                       np.nan_to_num(real["width"][:n], nan=float(np.nanmedian(real["width"])))]
+        r = lambda x: grid.correlation(x[:n], real["opening"][:n])
+        got.setdefault("prediction", []).append(r(pred[:, 0]))
+        for name, audio, share in (("phones", None, S.AUDIO_SHARE), ("audio", pred, S.AUDIO_SHARE),
+                                   ("oracle", oracle, (1.0, 1.0))):
+            keep = S.AUDIO_SHARE, S.AUDIO_GAIN
+            S.AUDIO_SHARE, S.AUDIO_GAIN = share, (S.AUDIO_GAIN if name == "audio" else 1.0)
+            try:
+                s = sel.select(anim.specs, anim.phones, anim.fps, params, audio=audio)
+            finally:
+                S.AUDIO_SHARE, S.AUDIO_GAIN = keep
+            got.setdefault(name + " target", []).append(r(s.target.opening))
+            got.setdefault(name + " selected", []).append(r(samples.opening[s.samples]))
+            src, dst, alpha = frame_plan(s.samples, sel.succ, s.target.closed | s.target.rest)
+            got.setdefault(name + " planned", []).append(r((1 - alpha) * samples.opening[src] +
+                                                           alpha * samples.opening[dst]))
+            got.setdefault(name + " runs", []).append(s.runs())
+    m = {k: round(float(np.mean(v)), 3) for k, v in got.items()}
+    case = f"({len(clips)} held-out sentences, no render)"
+    rows.append({"figure": "samples", "case": f"target: the speech's prediction alone {case}",
+                 "lip_r": m["prediction"]})
+    for name, what in (("phones", "today's target (phones, pictures)"),
+                       ("audio", f"audio target (share {S.AUDIO_SHARE[0]} of the prediction)"),
+                       ("oracle", "oracle target (the real opening and width)")):
+        rows.append({"figure": "samples", "case": f"target: {what} {case}", "target_r": m[name + " target"],
+                     "selected_r": m[name + " selected"], "joins_blended_r": m[name + " planned"],
+                     "mean_run_frames": round(m[name + " runs"], 2)})
 
 
 def _stage_rows(bank, rows: List[dict]) -> None:
@@ -455,6 +697,7 @@ def samples_figures(ctx: Context, rows: List[dict]) -> None:
     _stage_rows(bank, rows)
     _selection_rows(bank, rows)
     judged = held[:TUNED_FROM]  # the selection's weights were chosen on the rest
+    target_rows(bank, judged, rows)
     _render_rows(ctx, bank, judged[:6] if ctx.quick else judged, mesh, rows)
     pairs = list(zip(judged[0::2], judged[1::2]))[: 3 if ctx.quick else 10]
     _dub_rows(ctx, bank, pairs, mesh, rows)

@@ -54,5 +54,6 @@ def run(args: argparse.Namespace) -> int:
 
         s = load_samples(replace(bank, samples=replace(bank.samples, enabled=True)))
         print(f"  samples: {len(s)} mouth samples from {len(s.clips)} clip(s), {s.crops.shape[2]}x{s.crops.shape[1]} "
-              f"crops, {int(s.run.max()) + 1} runs{'' if bank.samples.enabled else ' (switched off)'}")
+              f"crops, {int(s.run.max()) + 1} runs{'' if bank.samples.enabled else ' (switched off)'}"
+              f"{', audio lip model' if 'lip_weights' in s.table else ''}")
     return 0

@@ -45,6 +45,9 @@ def add_parser(sub) -> None:
     p.add_argument("--method", choices=METHODS.names(), default="flow", help="in-between method (default: flow)")
     p.add_argument("--map", default=None, metavar="NAME_OR_FILE", help="phoneme-to-viseme map")
     p.add_argument("--timing", choices=timing_names(), default=None, metavar="NAME", help=TIMING_HELP)
+    from ._samples import add_samples_option
+
+    add_samples_option(p)   # live sessions: a bank's mouth samples, selected within the look-ahead
     add_store_option(p)
     add_quiet_option(p)
     p.set_defaults(func=run)
@@ -64,7 +67,7 @@ def run(args: argparse.Namespace) -> int:
                          fps=args.fps, quality=args.quality, max_sessions=args.max_sessions,
                          idle_timeout=args.idle_timeout, max_upload=int(max_upload_mb * (1 << 20)),
                          workers=args.workers, quiet=args.quiet, max_clip_seconds=args.max_clip_seconds,
-                         job_timeout=args.job_timeout)
+                         job_timeout=args.job_timeout, samples=args.samples)
     try:
         serve(config, host=args.host, port=args.port)
     except KeyboardInterrupt:

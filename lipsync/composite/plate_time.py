@@ -216,9 +216,19 @@ class PlateTimes:
         self.min_run = max(1, int(round(min_run * self.fps)))
         self.min_jump = max(2, int(round(min_jump * self.fps)))
         self.idx, self.cost = _pair_costs(f, self.step) if self.n > 1 else (np.zeros((1, 0), int), np.zeros((1, 0)))
+        self._joins: dict = {}
 
     def joins(self, i: int) -> List[Tuple[int, float]]:
-        """The allowed joins out of frame ``i``: ``[(j, cost), ...]``."""
+        """The allowed joins out of frame ``i``: ``[(j, cost), ...]`` (do not modify it)."""
+        # Planning asks the same few hundred frames for their joins at every run of a long
+        # clip or session; sorting each time was over half of the planning (a session told
+        # the clock is an hour in planned for ~19 s).
+        got = self._joins.get(i)
+        if got is None:
+            got = self._joins[i] = self._joins_of(i)
+        return got
+
+    def _joins_of(self, i: int) -> List[Tuple[int, float]]:
         if self.busy[i]:
             return []
         out = []

@@ -1,13 +1,14 @@
 """Real mouth samples onto a plate: one warp from the source frame's crop to the output pixel.
 
 A frame that shows a sample as it is (:func:`lipsync.selection.frame_plan`: inside a run of
-the source, or a join's last frame) is written with **one** resample::
+the source, or a join's last frame) is written with **one** resample at most::
 
     sample crop --(pose o affine: stabilisation, pose onto the plate, placement, as one 2x3)-->
     plate ROI --colour LUT--> --feathered mask blend--> plate frame (in place)
 
 bicubic (:data:`INTERPOLATION`), at the footage's own scale (a bank made from video keeps
-it: nothing is upscaled). Across a join the two samples are brought into the bank's box
+it: nothing is upscaled); where that map is a translation (a dub onto the bank's own
+speaker: :data:`SNAP_PX`) the crop is copied at a whole-pixel offset, not resampled. Across a join the two samples are brought into the bank's box
 (one resample each), morphed by the Beier–Neely flow between their lip lines (the paper's
 method, computed once per pair and kept in the flow store) and composited as the viseme
 morph is (:meth:`lipsync.composite.plate.PlateCompositor.apply`).
@@ -41,9 +42,19 @@ import numpy as np
 from .plate import PlateCompositor, compose, pose_inverse
 
 #: The one resample from the source crop to the output: bicubic keeps the Laplacian's
-#: variance of GRID s1's mouths within a few per cent at a sub-pixel shift, where bilinear
-#: loses a fifth of it (``python -m lipsync.bench --only samples``, the per-stage figures).
+#: variance of GRID s1's stored crops at 0.97-1.00 through the bank's 0.96 scale (any
+#: sub-pixel shift), where bilinear keeps 0.64-0.72; a fractional shift at scale 1 costs
+#: more (see :data:`SNAP_PX`).
 INTERPOLATION = cv2.INTER_CUBIC
+#: A paste whose map from the crop to the output is a translation to within this many pixels
+#: (the linear part's residual at the crop's corners) is a copy at the nearest whole-pixel
+#: offset: no resample at all. Any resample at a fractional offset is a low-pass filter: on
+#: GRID s1's stored crops bicubic keeps 0.85 of the Laplacian's variance at a quarter-pixel
+#: shift and 0.71 at a half (Lanczos4 0.92 / 0.81; bilinear 0.55 / 0.41), and a dub onto the
+#: bank's own speaker (crop -> video scale 1 to within a per cent) lands at arbitrary fractions:
+#: its mouth was 0.82-0.86x the input's. The copy is off by at most half a pixel plus this
+#: residual: below the face tracker's own jitter at GRID's scale (about half a pixel).
+SNAP_PX = 1.0
 #: Join flows kept in memory (each a box of ~100x90x2 floats at GRID's scale, 70 kB).
 CACHE_FLOWS = 64
 #: Beier–Neely weights for the lip lines (bank.yaml's warp defaults).
@@ -61,6 +72,30 @@ def lip_lines(lips: np.ndarray) -> np.ndarray:
     """
     p = np.asarray(lips, np.float64).reshape(4, 11, 2)
     return np.concatenate([np.stack([c[:-1], c[1:]], axis=1) for c in p])
+
+
+def whole_shift(m: np.ndarray, shape) -> Optional[tuple]:
+    """``(dx, dy)`` whole pixels if the 2x3 map ``m`` of an image of ``shape`` (H, W) moves
+    every corner to within :data:`SNAP_PX` of where the pure translation of its centre puts
+    it; else None (the map scales or turns: it needs a resample).
+
+    Examples
+    --------
+    >>> whole_shift(np.array([[1.0, 0, 10.4], [0, 1.0, -3.6]]), (64, 82))
+    (10, -4)
+    >>> whole_shift(np.array([[1.002, 0, 10.4], [0, 1.002, -3.6]]), (64, 82))   # 0.1 px at the corners
+    (10, -4)
+    >>> whole_shift(np.array([[0.96, 0, 10.4], [0, 0.96, -3.6]]), (64, 82)) is None   # 4% smaller
+    True
+    """
+    h, w = shape[:2]
+    lin = np.asarray(m, np.float64)[:, :2] - np.eye(2)
+    corners = np.array([[-w, -h], [w, -h], [w, h], [-w, h]], np.float64) / 2.0
+    if float(np.abs(corners @ lin.T).max()) > SNAP_PX:
+        return None
+    centre = np.asarray(m, np.float64) @ np.array([(w - 1) / 2.0, (h - 1) / 2.0, 1.0])
+    off = centre - np.array([(w - 1) / 2.0, (h - 1) / 2.0])
+    return int(np.floor(off[0] + 0.5)), int(np.floor(off[1] + 0.5))
 
 
 class SampleCompositor:
@@ -123,10 +158,15 @@ class SampleCompositor:
         rx0, ry0, rx1, ry1 = prepared.roi
         h, w = ry1 - ry0, rx1 - rx0
         to_plate = compose(pose, self.samples.affine[k])
-        inv = compose(pose_inverse(to_plate), np.array([[1.0, 0.0, rx0], [0.0, 1.0, ry0]]))
+        shift = whole_shift(to_plate, self.samples.crops.shape[1:3])
         img = self._scratch(h, w)
-        cv2.warpAffine(self.samples.crops[k], inv, (w, h), dst=img, flags=INTERPOLATION | cv2.WARP_INVERSE_MAP,
-                       borderMode=cv2.BORDER_REPLICATE)
+        if shift is not None:  # a copy: crop pixel (x, y) to output (x + dx, y + dy)
+            inv = np.array([[1.0, 0.0, rx0 - shift[0]], [0.0, 1.0, ry0 - shift[1]]])
+            flags = cv2.INTER_NEAREST | cv2.WARP_INVERSE_MAP
+        else:
+            inv = compose(pose_inverse(to_plate), np.array([[1.0, 0.0, rx0], [0.0, 1.0, ry0]]))
+            flags = INTERPOLATION | cv2.WARP_INVERSE_MAP
+        cv2.warpAffine(self.samples.crops[k], inv, (w, h), dst=img, flags=flags, borderMode=cv2.BORDER_REPLICATE)
         if self._pastes is not None:
             cv2.LUT(img, self._pastes[min(k, len(self._pastes) - 1)][None], dst=img)
         dst = plate[ry0:ry1, rx0:rx1]

@@ -30,7 +30,7 @@ from ..banks.bank import Bank
 from ..motion.coarticulation import resolve_timing, viseme_classes
 from ..errors import InputError, TimelineError
 from ..phonetics.phonemes import DEFAULT_MAP, PhonemeMap, bank_viseme_timeline, check_map_against, load_map
-from ..motion.frames import DEFAULT_FPS
+from ..motion.frames import DEFAULT_FPS, frame_count
 from ..motion.sequencer import FrameSpec
 from ..morphing.store import FlowStore
 from ..motion.timeline import MAX_TIMELINE_S, PHONEME, VISEME, Segment, Timeline
@@ -64,6 +64,14 @@ EVENTS_AT = ("start", "end")
 #: The longest event assumed for ``events_at="end"``: long vowels and phrase-final sounds
 #: run to 300 ms (the MFA recording's longest phone, pauses aside, is 280 ms).
 LONGEST_EVENT_S = 0.3
+
+#: A session with samples asked for a frame this many frames past the last one fixed, when
+#: they lie past the data (rest), starts its path there instead of fixing each (a clock run
+#: on for minutes with nothing pushed would otherwise fix thousands of frames at once).
+_JUMP_FRAMES = 50
+
+#: Phones a session with samples keeps before dropping those its windows no longer reach.
+_KEEP_PHONES = 256
 
 #: Longest single event accepted: a phone or word longer than a minute is a wrong time
 #: (milliseconds sent as seconds), not speech, and would plan thousands of frames at once.
@@ -130,6 +138,11 @@ class LiveAnimator:
         Seconds into the idle plate where the session starts (as ``--plate-start``; default
         0, where ``lipsync render --live`` starts): sessions given different starts do not
         blink in unison (``lipsync serve`` gives each session its own).
+    samples : {None, "on", "off"} or bool
+        Whether a bank with mouth samples (bank.yaml ``samples:``, banks made from video)
+        shows a real sample per frame on its plate, selected within the look-ahead
+        (:mod:`lipsync.live.samples`; with everything pushed before the first frame, the
+        offline render's samples); None: as bank.yaml says; ``"off"``: the viseme morph.
 
     Notes
     -----
@@ -148,7 +161,8 @@ class LiveAnimator:
                  method: str = "flow", lookahead: Optional[float] = None, store: Optional[FlowStore] = None,
                  renderer: Optional[RendererPool] = None, prepare: Optional[bool] = None,
                  audio_lookahead: Optional[float] = None, events_at: str = "start",
-                 longest_event: float = LONGEST_EVENT_S, still: bool = False, plate_start: float = 0.0):
+                 longest_event: float = LONGEST_EVENT_S, still: bool = False, plate_start: float = 0.0,
+                 samples=None):
         self.bank = bank if isinstance(bank, Bank) else Bank.load(bank)
         self.pmap = map if isinstance(map, PhonemeMap) else load_map(map or DEFAULT_MAP)
         self._map_path = map if isinstance(map, (str, os.PathLike)) and os.path.isfile(map) else None
@@ -175,6 +189,12 @@ class LiveAnimator:
         #: Where on the plate the session starts, seconds.
         self.plate_start = float(plate_start)
         self._plate_line = None if self.plate is None else self.plate.timeline(self.plate_start)
+        #: The session's mouth samples (:mod:`lipsync.live.samples`; None: the viseme morph).
+        self.samples = self._attach_samples(samples)
+        self._phones: List[Tuple[float, float, str]] = []   # the phones pushed (the samples' targets)
+        self._phone_kind = VISEME       # PHONEME once a phone was pushed
+        self._phones_kept = 0           # phones left by the last pruning (_add_phones)
+        self._version = 0               # bumped when the data a sample window sees changes
         self._mouth = threading.local()   # each render thread its own morphed frame
         self._state = threading.Lock()   # the track and its plan (the pool guards the renderers)
         self._warned: set = set()
@@ -228,11 +248,14 @@ class LiveAnimator:
         """
         if isinstance(start, Timeline):
             segs = self.resolve_timeline(start, offset=offset)
+            phones = [(s.start + offset, s.end + offset, s.label) for s in start.segments]
+            phone_kind = start.kind
         else:
             if end is None or label is None:
                 raise InputError("push(start, end, label) needs all three (or a Timeline)")
-            segs = self.resolve(start, end, label, kind=kind, offset=offset)
+            segs, phones, phone_kind = self._resolve(start, end, label, kind=kind, offset=offset)
         with self._state:
+            self._version += 1
             if self._fe is not None:
                 self._hold_events(segs)
                 return
@@ -240,6 +263,25 @@ class LiveAnimator:
                 self._seq.extend(segs)
             except ValueError as exc:
                 raise TimelineError(str(exc)) from None
+            self._add_phones(phones, phone_kind)
+
+    def _add_phones(self, phones, kind: str) -> None:
+        """Keep pushed phones (or visemes) for the samples' targets, in time order."""
+        if self.samples is None:
+            return
+        if kind == PHONEME:
+            self._phone_kind = PHONEME
+        last = self._phones[-1][1] if self._phones else 0.0
+        self._phones.extend((max(float(a), last), float(b), lab) for a, b, lab in phones if b > last)
+        # (amortised: a long list pushed ahead of the frames is scanned rarely)
+        if len(self._phones) > 2 * self._phones_kept + _KEEP_PHONES:
+            # a window reaches back CONTEXT_S before the next frame to fix: older phones are
+            # never read again (each window's cost stays independent of the session's length)
+            from .samples import CONTEXT_S
+
+            cut = len(self.samples) / self.fps - 2 * CONTEXT_S
+            self._phones = [p for p in self._phones if p[1] > cut]
+            self._phones_kept = len(self._phones)
 
     def resolve(self, start, end, label: str, *, kind: Optional[str] = None, offset: float = 0.0
                 ) -> List[Tuple[float, float, str]]:
@@ -257,6 +299,10 @@ class LiveAnimator:
         >>> live.resolve(0.0, 0.2, "AY1")
         [(0.0, 0.1, 'D'), (0.1, 0.2, 'B')]
         """
+        return self._resolve(start, end, label, kind=kind, offset=offset)[0]
+
+    def _resolve(self, start, end, label: str, *, kind: Optional[str] = None, offset: float = 0.0):
+        """``(viseme segments, phone segments, kind of the phone segments)`` of one event."""
         try:
             t0, t1 = float(start) + float(offset), float(end) + float(offset)
         except (TypeError, ValueError):
@@ -281,7 +327,7 @@ class LiveAnimator:
         if kind == "word":
             return self._word(t0, t1, label)
         tl = Timeline((Segment(t0, t1, label),), kind=VISEME if kind == "viseme" else PHONEME)
-        return self._map_timeline(tl, 0.0, first=t0)
+        return self._map_timeline(tl, 0.0, first=t0), [(t0, t1, label)], tl.kind
 
     def resolve_timeline(self, timeline: Timeline, *, offset: float = 0.0) -> List[Tuple[float, float, str]]:
         """The bank's viseme segments for a whole timeline, mapped as the offline Animator maps it.
@@ -300,8 +346,9 @@ class LiveAnimator:
             raise InputError(f"word events need lipsync.speech.phonetise (not installed): {word!r}")
         phones = self._words(Timeline((Segment(t0, t1, word),), kind=PHONEME))
         if not len(phones):  # nothing to say ("..."): the mouth rests for the word's time
-            return [(t0, t1, self.bank.rest)]
-        return self._map_timeline(phones, 0.0, first=t0)
+            return [(t0, t1, self.bank.rest)], [], PHONEME
+        return (self._map_timeline(phones, 0.0, first=t0), [(s.start, s.end, s.label) for s in phones.segments],
+                PHONEME)
 
     def _map_timeline(self, tl: Timeline, offset: float, first: float = 0.0) -> List[Tuple[float, float, str]]:
         if offset:
@@ -443,6 +490,7 @@ class LiveAnimator:
             due: List[int] = []
             while self._fe.step():   # one block at a time: the state after each is the same for any chunking
                 self._tail = None
+                self._version += 1
                 self._commit(self._fe.frames - self._commit_frames())
                 now = self._fe.time
                 while True:
@@ -490,6 +538,7 @@ class LiveAnimator:
                 return []
             self._fe.end()
             self._tail = None
+            self._version += 1
             self._commit(self._fe.frames, flush=True)
             self._finished = True
             total = frame_count(self._fe.duration, self.fps)
@@ -566,6 +615,7 @@ class LiveAnimator:
         if flush:
             keep, new_f = runs, max(fe.frames, self._committed_f)
         segs = self._phone_segments(keep, self._committed_f)
+        self._add_phones([(a * FRAME_S, b * FRAME_S, p) for a, b, p in keep], PHONEME)   # the samples' targets
         cut = new_f * FRAME_S
         if flush and self._events:
             cut = max(cut, self._events[-1][1])
@@ -586,9 +636,85 @@ class LiveAnimator:
         return self._seq.cue_with(n, self._tail_segments())
 
     def _fix(self, n: int) -> None:
-        """Frame ``n`` (the next) is due: fix its spec and its shape from what is heard now."""
+        """Frame ``n`` (the next) is due: fix its spec and its shape (and its sample) from what is heard now."""
         self._shown.append(self._provisional(n))
         self._shapes.append(self._provisional_shape(n))
+        if self.samples is not None:
+            self._fix_sample_heard(n)
+
+    def _fix_sample_heard(self, n: int) -> None:
+        """Audio: fix frame ``n``'s sample from a window over the frames the audio reaches."""
+        from .samples import frames_heard
+
+        tail = self._tail_segments()
+        stop = max(n + 1, frames_heard(self._fe.time, self.fps))
+        phones = self._phones + self._tail_phones()
+        while len(self.samples) <= n:   # (frames rendered from pushed events before the audio are fixed)
+            self.samples.fix(lambda a, b: self._shown[a:n + 1] + self._seq.specs_with(n + 1, b, tail), phones,
+                             PHONEME, stop, (self._version, stop))
+
+    def _tail_phones(self) -> List[Tuple[float, float, str]]:
+        """Audio: the phones heard but not yet pushed (provisional), as segments."""
+        from .audio import FRAME_S
+
+        runs = self._fe.phones(self._committed_f)
+        return [(a * FRAME_S, b * FRAME_S, p) for a, b, p in runs]
+
+    def _attach_samples(self, option):
+        """The session's :class:`~lipsync.live.samples.LiveSamples` when the bank has samples,
+        they are on and frames go onto its plate; else None (the viseme morph)."""
+        from ..motion.coarticulation import DominanceParams
+        from .samples import LiveSamples, samples_wanted, shared_samples
+
+        samples_wanted(option)   # a bad value is refused whatever the bank
+        if self.plate is None:
+            return None
+        shared = shared_samples(self.bank, option, self._bank_map, self.renderer.store)
+        if shared is None:
+            return None
+        return LiveSamples(shared, self.fps, self.timing if isinstance(self.timing, DominanceParams) else None)
+
+    def sample(self, n: int) -> int:
+        """The mouth sample frame ``n`` shows (an index into the bank's samples; its frame
+        shows it, or the morph into it across a join); fixed now if it was not (pushed
+        events: from what is pushed by now, and every earlier frame first). Fixed samples
+        never change. ValueError when the session does not use samples."""
+        if self.samples is None:
+            raise ValueError("this session shows the viseme morph (no samples)")
+        return self._sample_shown(n)[0]
+
+    def _sample_shown(self, n: int) -> Tuple[int, int]:
+        """``(sample, frame whose plan is shown)``: with audio, a frame not due yet holds
+        the newest fixed one (its sample is fixed when its audio comes)."""
+        n = max(int(n), 0)
+        with self._state:
+            sel = self.samples.selection
+            if self._fe is not None:
+                if n >= len(sel):
+                    n = len(sel) - 1
+                if n < sel.first:   # nothing heard yet: the viseme morph's rest
+                    return -1, -1
+                return sel.sample(n), n
+            if n < sel.first:       # skipped by a jump (below): never shown with a sample
+                return -1, -1
+            rest_from = frame_count(self._seq.horizon + self._seq._relax_s, self.fps)
+            if n - max(len(sel), rest_from) > _JUMP_FRAMES:
+                # far past the data (a clock that ran on with nothing pushed): the frames
+                # from rest_from on are rest; fix those with data, then go on from frame n
+                # rather than fixing every frame on the way
+                while len(sel) < rest_from:
+                    self._fix_sample_pushed()
+                sel.restart(n)
+            while len(sel) <= n:
+                self._fix_sample_pushed()
+            return sel.sample(n), n
+
+    def _fix_sample_pushed(self) -> None:
+        """Pushed events: fix the next frame's sample from a window up to the end of the data."""
+        c = len(self.samples)
+        stop = max(c + 1, frame_count(self._seq.horizon, self.fps))
+        self.samples.fix(lambda a, b: [self._seq.spec(k) for k in range(a, b)], self._phones, self._phone_kind,
+                         stop, (self._version, stop))
 
     def _tail_segments(self) -> List[Tuple[float, float, str]]:
         if self._tail is None:
@@ -646,6 +772,13 @@ class LiveAnimator:
 
     def frame(self, n: int, *, out: Optional[np.ndarray] = None) -> np.ndarray:
         """Frame ``n`` as RGB ``uint8`` (RGBA for a transparent bank; a new array unless ``out`` is given)."""
+        if self.samples is not None:
+            n = max(int(n), 0)
+            _, k = self._sample_shown(n)   # fixes frames up to n (pushed events: from what is pushed now)
+            if k >= 0:
+                if out is None:
+                    out = np.empty(self.renderer.shape + (self.renderer.channels,), np.uint8)
+                return self.samples.render(n, self.plate, self._plate_line, out, shows=k)
         spec = self.spec(n)
         if self.plate is None:
             return self.renderer.render(spec.from_viseme, spec.to_viseme, spec.alpha, out=out)

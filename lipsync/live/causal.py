@@ -234,6 +234,32 @@ class CausalSequencer:
         finally:
             self._raw, self._horizon = raw, horizon
 
+    def specs_with(self, first: int, stop: int, tail: Track) -> List[FrameSpec]:
+        """Frames ``first .. stop - 1`` as :meth:`spec_with` gives them one by one, planned
+        in one pass (a live session's sample window: :mod:`lipsync.live.samples`)."""
+        tail = [(max(float(s), self._horizon), float(e), v) for s, e, v in tail if e > self._horizon]
+        first = max(first, 0)
+        if not tail or stop <= first:
+            return [self.spec(n) for n in range(first, stop)]
+        if self._window is None:
+            self.spec(self._first)
+        out = [self._frozen[n] for n in range(first, min(stop, self._first))]
+        lo = max(first, self._first)
+        raw, horizon = self._raw, self._horizon
+        try:
+            self._raw, self._horizon = raw + tail, tail[-1][1]
+            data = frame_count(self._horizon, self.fps)
+            if lo < min(stop, data):
+                out += self._plan(self._horizon, lo, min(stop, data), data)
+            if stop > data:
+                total = self._horizon + self._relax_s
+                end = frame_count(total, self.fps)
+                out += self._plan(total, max(lo, data), min(stop, end), end)
+                out += [self._rest_spec] * (stop - first - len(out))
+            return out
+        finally:
+            self._raw, self._horizon = raw, horizon
+
     def cue(self, n: int) -> str:
         """The mouth shape frame ``n`` shows as a cue, from the track so far: the viseme of
         the planned segment (:func:`lipsync.motion.sequencer.plan_segments`, the track

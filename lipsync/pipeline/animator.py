@@ -74,6 +74,10 @@ class Animator:
         Whether a bank with mouth samples (bank.yaml ``samples:``, banks made from video)
         shows a real sample per frame on its plate (:mod:`lipsync.pipeline.samplepath`);
         None: as bank.yaml says; ``"off"``: one picture per viseme, morphed.
+    audio : path-like or numpy.ndarray, optional
+        The speech the timeline is of (a file, or 16 kHz mono samples): with samples, a bank
+        with an audio lip model selects them for the lip movement the sound predicts
+        (:mod:`lipsync.samples.lipmodel`); :meth:`from_audio` passes its audio.
 
     Attributes
     ----------
@@ -94,7 +98,7 @@ class Animator:
     def __init__(self, bank: Union[Bank, str, "os.PathLike[str]"], timeline, fps: float = DEFAULT_FPS, *,
                  map: Union[str, "os.PathLike[str]", PhonemeMap, None] = None, method: str = "flow",
                  timing=None, store: Optional[FlowStore] = None, timeline_options=None, still: bool = False,
-                 plate_start: Optional[float] = None, samples=None):
+                 plate_start: Optional[float] = None, samples=None, audio=None):
         self.bank = bank if isinstance(bank, Bank) else Bank.load(bank)
         self.fps = check_fps(fps)
         if not isinstance(timeline, Timeline):
@@ -112,9 +116,9 @@ class Animator:
                                                closures=pmap.closures, classes=viseme_classes(pmap, self.bank.rest))
         self.renderer = Renderer(self.bank, method=method, store=store)
         self._attach_plate(still, plate_start)
-        self._attach_samples(samples, timeline, pmap, store)
+        self._attach_samples(samples, timeline, pmap, store, audio)
 
-    def _attach_samples(self, option, timeline, pmap, store) -> None:
+    def _attach_samples(self, option, timeline, pmap, store, audio=None) -> None:
         """Select the bank's mouth samples when it has them, they are on and frames go onto its plate."""
         from .samplepath import SamplePath, bank_samples
 
@@ -125,7 +129,8 @@ class Animator:
         samples = bank_samples(self.bank, option)
         if samples is not None:
             self.sample_path = SamplePath(samples, self.specs, timeline, self.fps, pmap, self.bank.rest,
-                                          store=store or FlowStore.for_bank(self.bank), timing=self.timing)
+                                          store=store or FlowStore.for_bank(self.bank), timing=self.timing,
+                                          audio=audio)
 
     def _attach_plate(self, still: bool, plate_start: Optional[float] = None) -> None:
         """The bank's idle plate to composite onto, unless ``still`` (or the bank has none),
@@ -192,6 +197,7 @@ class Animator:
             # "lipsync" is not in CMUdict; the caller can read alignment.missing instead.
             warnings.simplefilter("ignore", MissingWordsWarning)
             alignment = align(audio, text, lang=lang)
+        kwargs.setdefault("audio", audio)
         anim = cls(bank, alignment.phones, fps=fps, **kwargs)
         anim.alignment = alignment
         return anim

@@ -295,12 +295,13 @@ def render_clip(timeline, output: PathLike, *, bank=None, audio: Optional[PathLi
 
         anim = LiveClip(bank, timeline, fps=fps, lookahead=None if live is True else live, map=map,
                         method=method, timing=timing, store=store, quiet=quiet,
-                        still=still or not compositor.passthrough, plate_start=plate_start or 0.0)
+                        still=still or not compositor.passthrough, plate_start=plate_start or 0.0,
+                        samples=samples)
     else:
         # the idle plate (a bank made from video) only where the frame is the bank's picture itself
         anim = Animator(bank, timeline, fps=fps, map=map, method=method, timing=timing, store=store,
                         timeline_options=timeline_options, still=still or not compositor.passthrough,
-                        plate_start=plate_start, samples=samples)
+                        plate_start=plate_start, samples=samples, audio=audio)
     n = len(anim)
     if n == 0:  # a video needs a frame; a timeline of no length has none to show (README: Rendering)
         where = getattr(timeline, "path", None) if hasattr(timeline, "segments") else os.fspath(timeline)

@@ -510,7 +510,7 @@ def dub(video: PathLike, audio: PathLike, output: PathLike, *, text: Optional[st
     nb = anim.renderer.nb
     if any(not store.pair_path(store.pair_key(bank, a, b, nb.axis)).exists() for a, b in all_pairs(bank.names)):
         preprocess(bank, store=store, jobs=jobs, quiet=quiet, normalised=nb)
-    sample_path = _sample_path(bank, anim, sample_option, compositor, store)
+    sample_path = _sample_path(bank, anim, sample_option, compositor, store, samples)
     seconds["align"] += time.perf_counter() - t
 
     t = time.perf_counter()
@@ -565,13 +565,13 @@ def dub(video: PathLike, audio: PathLike, output: PathLike, *, text: Optional[st
                      bank=str(bank.path), seconds=seconds)
 
 
-def _sample_path(bank, anim, option, compositor, store):
+def _sample_path(bank, anim, option, compositor, store, speech=None):
     """The dub's :class:`~lipsync.pipeline.samplepath.SamplePath` (None: the bank has no samples
-    or they are off)."""
+    or they are off); ``speech``: the new speech's 16 kHz samples (the audio target's)."""
     from .samplepath import SamplePath, bank_samples
 
     got = bank_samples(bank, option)
     if got is None or not anim.specs:
         return None
     return SamplePath(got, anim.specs, anim.phones, anim.fps, anim.pmap, bank.rest, lut=compositor.lut, store=store,
-                      timing=anim.timing)
+                      timing=anim.timing, audio=speech)

@@ -47,12 +47,13 @@ def _samples(audio) -> np.ndarray:
 
 
 def live_session(audio, bank, *, fps: float = DEFAULT_FPS, lookahead: Optional[float] = None, map=None,
-                 timing=None, quiet: bool = True):
+                 timing=None, quiet: bool = True, samples="off"):
     """A :class:`~lipsync.live.animator.LiveAnimator` fed ``audio`` in real-time 20 ms chunks
     and ended (:meth:`~lipsync.live.animator.LiveAnimator.finish_audio`): every frame of the
     recording fixed, ``(animator, frame count)`` with the count ``ceil(duration * fps)``.
 
-    Parameters are those of :func:`live_specs`.
+    Parameters are those of :func:`live_specs`; ``samples`` as for
+    :class:`~lipsync.live.animator.LiveAnimator` (default off: only the frames' specs are wanted).
 
     Examples
     --------
@@ -67,7 +68,8 @@ def live_session(audio, bank, *, fps: float = DEFAULT_FPS, lookahead: Optional[f
     from ..live.animator import LiveAnimator
 
     pcm = _samples(audio)
-    live = LiveAnimator(bank, fps=fps, map=map, timing=timing, prepare=False, audio_lookahead=lookahead)
+    live = LiveAnimator(bank, fps=fps, map=map, timing=timing, prepare=False, audio_lookahead=lookahead,
+                        samples=samples)
     fixed = 0
     with tqdm(total=len(pcm), desc="live", unit="sample", unit_scale=True, disable=quiet, leave=False) as bar:
         for i in range(0, len(pcm), BLOCK):
@@ -149,15 +151,23 @@ def live_cues(frames, fps: float) -> List[Tuple[float, float, str]]:
 
 class LiveClip(Animator):
     """An :class:`~lipsync.pipeline.animator.Animator` whose frames are a live session's
-    (:func:`live_specs`): what ``render_clip(..., live=...)`` renders."""
+    (:func:`live_specs`; on a bank with samples, the samples the session fixed within its
+    look-ahead, unless ``samples="off"``): what ``render_clip(..., live=...)`` renders."""
 
     def __init__(self, bank, audio, fps: float = DEFAULT_FPS, *, lookahead: Optional[float] = None, map=None,
                  method: str = "flow", timing=None, store=None, quiet: bool = True, still: bool = False,
-                 plate_start: float = 0.0):
+                 plate_start: float = 0.0, samples=None):
         self.bank = bank if isinstance(bank, Bank) else Bank.load(bank)
-        self.specs = live_specs(audio, self.bank, fps=fps, lookahead=lookahead, map=map, timing=timing, quiet=quiet)
+        live, n = live_session(audio, self.bank, fps=fps, lookahead=lookahead, map=map, timing=timing, quiet=quiet,
+                               samples="off" if still else samples)
+        self.specs = [live.spec(k) for k in range(n)]
         self.fps = float(fps)
         self.renderer = Renderer(self.bank, method=method, store=store)
         # the plate timeline a live session started at plate_start follows (default 0,
         # LiveAnimator's): render --live shows what the session shows
         self._attach_plate(still, plate_start=plate_start)
+        if live.samples is not None and self.plate is not None:
+            from ..live.samples import FixedPath
+
+            # the samples the session fixed, frame by frame within its look-ahead
+            self.sample_path = FixedPath(live.samples, n)

@@ -90,10 +90,13 @@ class SamplePath:
         Where the join flows are kept.
     timing : DominanceParams, optional
         The render's dominance constants (the bank's fitted ones): the predicted lip opening's.
+    audio : path-like or numpy.ndarray, optional
+        The speech rendered (a file, or 16 kHz mono samples): where the bank has an audio lip
+        model (:mod:`lipsync.samples.lipmodel`), the target follows what the sound predicts.
     """
 
     def __init__(self, samples, specs, timeline, fps: float, pmap, rest: str, *, lut=None, store=None,
-                 timing=None):
+                 timing=None, audio=None):
         from ..composite.samples import SampleCompositor
         from ..selection import Selector, frame_plan
 
@@ -101,8 +104,11 @@ class SamplePath:
         self.selector = _selector(samples, pmap, rest)
         from ..motion.coarticulation import DominanceParams
 
+        #: ``(frames, 2)``: the opening and width the speech predicts (None: no sound or no model).
+        self.audio_prediction = speech_prediction(samples, audio, fps, len(specs))
         self.selection = self.selector.select(specs, timeline, fps,
-                                              timing if isinstance(timing, DominanceParams) else None)
+                                              timing if isinstance(timing, DominanceParams) else None,
+                                              audio=self.audio_prediction)
         tg = self.selection.target
         self.src, self.dst, self.alpha = frame_plan(self.selection.samples, self.selector.succ, tg.closed | tg.rest)
         tag = hashlib.sha256(samples.affine.tobytes() + samples.lips.tobytes()).digest()
@@ -124,6 +130,28 @@ class SamplePath:
         """Frame ``i``'s mouth onto ``plate`` (in place) under ``pose``; returns ``plate``."""
         return self.compositor.render(int(self.src[i]), int(self.dst[i]), float(self.alpha[i]), plate, pose,
                                       prepared=prepared, geometry=geometry)
+
+
+def speech_prediction(samples, audio, fps: float, frames: int) -> Optional[np.ndarray]:
+    """``(frames, 2)``: the opening and width the bank's audio lip model predicts from ``audio``
+    (a file or 16 kHz mono samples); None without sound or without a model.
+
+    Examples
+    --------
+    >>> from types import SimpleNamespace
+    >>> speech_prediction(SimpleNamespace(table={}), np.zeros(16000, np.int16), 25.0, 25) is None
+    True
+    """
+    from ..samples.lipmodel import LipModel
+    from ..speech.audio import SAMPLE_RATE, load_audio
+
+    model = LipModel.from_table(samples.table)
+    if model is None or audio is None or frames <= 0:
+        return None
+    pcm = audio if isinstance(audio, np.ndarray) else load_audio(audio)
+    if not pcm.size:
+        return None
+    return model.predict(pcm, SAMPLE_RATE, fps, frames)
 
 
 def _selector(samples, pmap, rest):

@@ -188,10 +188,21 @@ def write_samples(folder: Path, footage, framing, rest_mesh: np.ndarray, rest_im
         names = sorted(pictures)
         table["pictures"] = np.array(names)
         table["picture_opening"] = np.array([float(lip_opening(np.asarray(pictures[v]))) for v in names])
+    table.update(lip_model(footage, table))
     buf = io.BytesIO()
     np.savez_compressed(buf, **table)
     (folder / TABLE_NAME).write_bytes(buf.getvalue())
     return f"samples: {{video: {VIDEO_NAME}, table: {TABLE_NAME}}}\n"
+
+
+def lip_model(footage, table) -> Dict[str, np.ndarray]:
+    """The audio lip model's arrays (:mod:`lipsync.samples.lipmodel`) fitted on the footage's
+    sound and the table's lips; none when no clip has sound (the target then comes from the
+    phones alone)."""
+    from .lipmodel import fit_clips
+
+    model = fit_clips([s.path for s in footage.sources], table["fps"].tolist(), table)
+    return {} if model is None else model.arrays()
 
 
 def crop_size(to_bank, keys, box) -> Tuple[int, int]:

@@ -33,6 +33,11 @@ array           shape, dtype       meaning
 ``picture_opening`` ``(K,)`` float ... and each picture's lip opening, as ``opening``: the
                                    selection's target blends the openings the one-picture
                                    morph would show (:mod:`lipsync.selection.select`)
+``lip_weights`` ``(D, 2)`` float   optional, with the next two: the audio lip model
+``lip_bias``    ``(2,)`` float     (:mod:`lipsync.samples.lipmodel`), a ridge regression from
+``lip_context`` ``()`` int         a frame's audio features (D = 26 x (2 x context + 1)) to its
+                                   opening and width; the selection's target follows the
+                                   new speech's prediction (a bank without it: the phones')
 ==============  =================  ===========================================================
 
 ``samples.mp4`` has exactly N frames, all the crop size (H.264 at crf :data:`CROP_CRF`).
@@ -179,6 +184,11 @@ def _problem(t: Dict[str, np.ndarray]) -> Optional[str]:
             return f"array {name!r} must be one {'name' if kind == 'U' else 'finite number'} per picture"
     if "pictures" in t and (len(t["pictures"]) != len(t["picture_opening"]) or (t["picture_opening"] < 0).any()):
         return "arrays 'pictures' and 'picture_opening' must pair a name with an opening of 0 or more"
+    from .lipmodel import problem as model_problem
+
+    bad_model = model_problem(t)
+    if bad_model:
+        return bad_model
     n = len(t["frame"])
     if n == 0 or n > MAX_SAMPLES:
         return f"{n} samples (1 to {MAX_SAMPLES})"

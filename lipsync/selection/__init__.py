@@ -3,7 +3,9 @@
 For an utterance's frames, a dynamic programme (:mod:`.viterbi`) over per-frame candidate
 samples (:mod:`.select`: nearest to the predicted lip shape, pruned with a k-d tree (OpenCV FLANN), and the
 continuations of the best runs so far) chooses one sample per frame, preferring runs of
-consecutive source frames; :mod:`.plan` says where a join between two samples is morphed.
+consecutive source frames; :mod:`.plan` says where a join between two samples is morphed;
+:mod:`.incremental` fixes the choice frame by frame for a live stream (the same programme
+over the look-ahead).
 
 Examples
 --------
@@ -15,8 +17,9 @@ Examples
 
 from __future__ import annotations
 
+from .incremental import Incremental
 from .plan import JOIN_FRAMES, frame_plan
 from .select import Selection, Selector, Target
 from .viterbi import Viterbi, best_path
 
-__all__ = ["Selector", "Selection", "Target", "Viterbi", "best_path", "frame_plan", "JOIN_FRAMES"]
+__all__ = ["Incremental", "Selector", "Selection", "Target", "Viterbi", "best_path", "frame_plan", "JOIN_FRAMES"]

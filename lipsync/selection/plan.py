@@ -22,11 +22,20 @@ from typing import Optional, Tuple
 
 import numpy as np
 
-#: Frames a join is morphed over. Runs are ~3 frames on GRID s1, so every morphed frame
-#: is a blend of two moments: on the 6 tuning sentences the rendered lip opening's r with
-#: the real one was 0.72 with joins cut, 0.68 with one morphed frame, 0.66 with two. One
-#: frame (40 ms at 25 fps) softens the step of a cut; the figure shows both.
-JOIN_FRAMES = 1
+#: Frames a join is morphed over: 0, joins are cut (the new sample shown at once). Measured
+#: both ways from one bank (``python -m lipsync.bench --only samples``, GRID s1, 18 held-out
+#: sentences; ``tools/other_face.py`` on two other speakers), cut against one morphed frame:
+#: lip r 0.804 / 0.780 (dub 0.807 / 0.762), range 0.81 / 0.69 (dub 0.79 / 0.66), the lips'
+#: sharpness over the real frames' 0.90 / 0.81 (dub 0.93 / 0.82; the other faces' dubs 0.93
+#: and 0.96 / 0.50 and 0.81), detector AUC 0.991 / 0.991 (dub 0.862 / 0.896). The morph
+#: only trims the largest steps: the mouth box's p99 change at a join over the real clips'
+#: p99 frame-to-frame change is 1.62 / 1.45 (dub 1.67 / 1.44; other faces 0.85-1.04 /
+#: 0.57-1.12), while the morphed frame itself is a double exposure of two mouths (teeth
+#: fade to a blur: full-size crops of the largest joins, ``tools/other_face.py --sheets``).
+#: Runs are short (2.7 frames on GRID s1), so a morphed frame is a third of all frames. The
+#: paper's flow morph across a join stays available: ``lipsync.selection.plan.JOIN_FRAMES
+#: = 1`` before the render (or ``frame_plan(..., join_frames=1)``).
+JOIN_FRAMES = 0
 
 
 def frame_plan(path: np.ndarray, succ: np.ndarray, exact: Optional[np.ndarray] = None,

@@ -71,6 +71,31 @@ TARGET_GAIN = 1.3
 #: 0.762 / 0.759 / 0.741; on held_out()[:18], never tuned on, 0.733 (share 0) -> 0.802 (0.5),
 #: the pictures' schedule alone 0.791 there.
 PICTURE_SHARE = 0.5
+#: Shares (opening, width) of the target taken from the speech's own prediction (the
+#: bank's audio lip model, :mod:`lipsync.samples.lipmodel`) where the render has the sound.
+#: Chosen on held_out()[18:30] (12 sentences; grid-s1's bank), lip opening r of the chosen
+#: samples (share / AUDIO_GAIN / AUDIO_OPEN_WEIGHT): no sound 0.763; 0.2 / 1.5 / 2: 0.778;
+#: 0.3 / 1.5 / 2: 0.783; 0.3 / 1.2 / 2: 0.777; 0.3 / 1.5 / 3: 0.787; 0.4 / 1.5 / 3: 0.784;
+#: 0.5 / 1.5 / 3: 0.782; 0.5 / 1 / 2: 0.771; 0.7 / 1.5 / 3: 0.774; 0 / 1 / 3 (the weight
+#: alone): 0.761; with the joins blended as planned (see AUDIO_OPEN_WEIGHT), 0.3 / 1.5 / 2
+#: 0.765, 0.4 / 1.5 / 2 0.741, 0.5 / 1.5 / 2 0.731, 0.3 / 2 / 2 0.746 (no sound 0.745). The
+#: target's own r: 0.766 (phones) -> 0.794 (share 0.3), the prediction alone 0.757. The
+#: width is left to the phones: the model's width r there is ~0.5.
+AUDIO_SHARE = (0.3, 0.0)
+#: The prediction's excursion from its mean is scaled by this: a ridge regression's
+#: prediction undershoots the real range (1.0 left the chosen samples' range at 0.90 of
+#: the speaker's, 1.5 at 1.04).
+AUDIO_GAIN = 1.5
+#: With the speech's prediction in the target, its opening term weighs this many times
+#: WEIGHTS["open"]: the phone and context terms were tuned against a target made from the
+#: phones themselves, and outweigh a target that disagrees with the phones' usual samples.
+#: Heavier follows the target closer but cuts more often, and a cut is morphed (which the
+#: chosen samples' own r does not see): on held_out()[18:30], share 0.3, the opening shown
+#: once joins are blended as lipsync.selection.plan does (the chosen samples' openings
+#: blended by the plan's alpha) had r 0.757 / 0.762 / 0.765 / 0.745 at weight 1 / 1.5 / 2
+#: / 3 (runs of 3.1 / 2.7 / 2.5 / 2.1 frames; the phones' target alone 0.745, 3.0); the
+#: first bench run at 3 rendered r 0.777 against the phones' target's 0.782.
+AUDIO_OPEN_WEIGHT = 2.0
 #: Candidates per frame from the viseme's tree: 24 keep the cost of a 10-minute clip's
 #: selection to seconds (K^2 joins per frame).
 NEAREST = 24
@@ -118,6 +143,7 @@ class Target:
     closed: np.ndarray     # bool: must show closed lips
     rest: np.ndarray       # bool: silence at rest
     position: np.ndarray = None  # how far into its phone each frame is, 0-1
+    open_weight: float = 1.0     # the opening term's weight over WEIGHTS["open"] (AUDIO_OPEN_WEIGHT with sound)
 
 
 @dataclass
@@ -179,14 +205,16 @@ def viseme_of(labels: np.ndarray, pmap, rest: str) -> np.ndarray:
 
 
 def make_target(samples, specs, timeline, fps: float, pmap, rest: str, closures: Sequence[str],
-                params=None) -> Target:
+                params=None, audio: Optional[np.ndarray] = None) -> Target:
     """The :class:`Target` of a render's frames (``specs``, the sequencer's) and phones.
 
     The predicted lip opening and width are the dominance model's schedule *of the phones*
     (:func:`phone_schedule`: each phone its own shape, valued at its samples' median) when
     the timeline has phones, else of the visemes (``specs``); where the table has the
     pictures' openings, the opening is blended with the pictures' schedule
-    (:data:`PICTURE_SHARE`)."""
+    (:data:`PICTURE_SHARE`). ``audio``, ``(frames, 2)``: the opening and width the speech
+    predicts (:meth:`lipsync.samples.lipmodel.LipModel.predict`), blended in by
+    :data:`AUDIO_SHARE` (None: the phones' target alone)."""
     from ..motion.coarticulation import predicted
 
     n = len(specs)
@@ -208,8 +236,31 @@ def make_target(samples, specs, timeline, fps: float, pmap, rest: str, closures:
                           {s.from_viseme for s in specs} | {s.to_viseme for s in specs}, closures)
         opening = predicted(specs, {v: x[0] for v, x in values.items()})
         width = predicted(specs, {v: x[1] for v, x in values.items()})
+    heard = audio is not None and n > 0
+    if heard:
+        opening, width = with_audio(opening, width, audio)
     return Target(phone=phone, prev=prev, next=nxt, viseme=view, opening=opening, width=width, closed=closed,
-                  rest=(view == rest) & (phone == "sil"), position=positions(phone))
+                  rest=(view == rest) & (phone == "sil"), position=positions(phone),
+                  open_weight=AUDIO_OPEN_WEIGHT if heard else 1.0)
+
+
+def with_audio(opening: np.ndarray, width: np.ndarray, audio: np.ndarray):
+    """The target ``opening`` and ``width`` blended with the speech's prediction ``audio``
+    (``(frames, 2)``; a shorter one's last row repeated) by :data:`AUDIO_SHARE`, the
+    prediction's excursion from its mean scaled by :data:`AUDIO_GAIN`.
+
+    Examples
+    --------
+    >>> o, w = with_audio(np.zeros(2), np.ones(2), np.array([[0.2, 1.0], [0.4, 1.0]]))
+    >>> bool(np.allclose(o, AUDIO_SHARE[0] * (0.3 + AUDIO_GAIN * np.array([-0.1, 0.1])))), w.tolist()
+    (True, [1.0, 1.0])
+    """
+    a = np.asarray(audio, np.float64)[:len(opening)]
+    if len(a) < len(opening):
+        a = np.vstack([a, np.repeat(a[-1:], len(opening) - len(a), axis=0)])
+    a = a.mean(axis=0) + AUDIO_GAIN * (a - a.mean(axis=0))
+    return ((1.0 - AUDIO_SHARE[0]) * opening + AUDIO_SHARE[0] * a[:, 0],
+            (1.0 - AUDIO_SHARE[1]) * width + AUDIO_SHARE[1] * a[:, 1])
 
 
 def picture_openings(samples) -> Dict[str, float]:
@@ -363,7 +414,7 @@ class Selector:
         if codes is None:
             codes = tuple(self.encode(x) for x in (tg.phone, tg.prev, tg.next, tg.viseme))
         phone_c, prev_c, next_c, vis_c = codes
-        d = np.abs(self.point[ids] - [tg.opening[t] * w["open"], tg.width[t] * w["width"]]).sum(axis=1)
+        d = np.abs(self.point[ids] - [tg.opening[t] * w["open"], tg.width[t] * w["width"]]) @ [tg.open_weight, 1.0]
         phone = np.where(self.c_phone[ids] == phone_c[t], w["phone_same"],
                          np.where(self.c_vis[ids] == vis_c[t], w["phone_viseme"], w["phone_other"]))
         ctx = w["context"] * ((self.c_prev[ids] != prev_c[t]).astype(float) +
@@ -395,11 +446,12 @@ class Selector:
             ids = np.concatenate([ids, nxt[self.allowed(nxt, kind)]])
         return np.unique(ids)
 
-    def select(self, specs, timeline, fps: float, params=None) -> Selection:
+    def select(self, specs, timeline, fps: float, params=None, audio=None) -> Selection:
         """One sample per frame of ``specs`` (the sequencer's schedule) for the phones of
-        ``timeline``; ``params``: the dominance model's constants (the bank's)."""
+        ``timeline``; ``params``: the dominance model's constants (the bank's); ``audio``:
+        the speech's predicted opening and width per frame (:func:`make_target`)."""
         t0 = time.perf_counter()
-        tg = make_target(self.samples, specs, timeline, fps, self.pmap, self.rest, self.closures, params)
+        tg = make_target(self.samples, specs, timeline, fps, self.pmap, self.rest, self.closures, params, audio)
         v = Viterbi()
         count = 0
         codes = tuple(self.encode(x) for x in (tg.phone, tg.prev, tg.next, tg.viseme))

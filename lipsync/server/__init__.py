@@ -92,6 +92,7 @@ class ServeConfig:
     quiet: bool = True
     max_clip_seconds: float = DEFAULT_MAX_CLIP_S
     job_timeout: float = DEFAULT_JOB_TIMEOUT_S
+    samples: Optional[str] = None    # live sessions: a bank's mouth samples (None: bank.yaml), "on", "off"
 
     def __post_init__(self) -> None:
         # Every number checked here, once, for the CLI and the library alike: a NaN timeout
@@ -142,11 +143,19 @@ class LiveServer:
         # the idle plate of a bank made from video, decoded once: every session composites
         # onto it (held here, so sessions coming and going do not decode it again)
         self.plate = shared_plate(self.bank)
+        from ..live.samples import samples_wanted, shared_samples
+        from ..phonetics.phonemes import check_map_against
+
+        # ... and its mouth samples, decoded and made ready for selection once (sessions
+        # share them; each keeps only its own path)
+        samples_wanted(config.samples)
+        self.samples = None if self.plate is None else shared_samples(
+            self.bank, config.samples, self.pmap.renamed(check_map_against(self.pmap, self.bank.names)), self.store)
         self.executor = ThreadPoolExecutor(max_workers=workers, thread_name_prefix="lipsync-live")
         self.tmp = Path(tempfile.mkdtemp(prefix="lipsync-serve-"))
         self.jobs = Jobs(self.tmp, bank=self.bank, store=self.store, fps=config.fps, map=config.map,
                          timing=config.timing, method=config.method, max_clip_seconds=config.max_clip_seconds,
-                         job_timeout=config.job_timeout)
+                         job_timeout=config.job_timeout, samples=config.samples)
         self.sessions: set = set()
         self.stats = {"frames": 0, "errors": 0, "sessions_total": 0, "refused_sessions": 0}
         self.app = Guard(self._routes(), session=session, max_body=config.max_upload,

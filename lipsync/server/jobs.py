@@ -76,8 +76,10 @@ class Jobs:
     """The render queue of one server (module docstring)."""
 
     def __init__(self, root: Path, *, bank, store, fps: float, map, timing, method: str,
-                 max_clip_seconds: float = DEFAULT_MAX_CLIP_S, job_timeout: float = DEFAULT_JOB_TIMEOUT_S):
+                 max_clip_seconds: float = DEFAULT_MAX_CLIP_S, job_timeout: float = DEFAULT_JOB_TIMEOUT_S,
+                 samples=None):
         self.root = root
+        self.samples = samples   # --samples on|off (None: bank.yaml's), as the live sessions
         self.bank, self.store, self.fps, self.map, self.timing, self.method = bank, store, fps, map, timing, method
         self.max_clip_seconds, self.job_timeout = float(max_clip_seconds), float(job_timeout)
         self._jobs: "OrderedDict[str, Job]" = OrderedDict()
@@ -225,7 +227,7 @@ class Jobs:
         try:
             render_clip(self._clip(source, options), str(folder / "out.mp4"), bank=self.bank, store=self.store,
                         fps=fps, map=self.map, timing=self.timing, method=self.method, quiet=True,
-                        timeline_options=options, progress=lambda done, total: send.send(("progress", done, total)))
+                        samples=self.samples, timeline_options=options, progress=lambda done, total: send.send(("progress", done, total)))
             send.send(("done", ""))
         except InputError as exc:
             send.send(("input", str(exc)))

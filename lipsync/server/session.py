@@ -75,7 +75,7 @@ class LiveSession:
             s = self.server
             self.live = LiveAnimator(s.bank, fps=self.fps, map=s.pmap, timing=s.config.timing,
                                      renderer=s.pool, prepare=False, audio_lookahead=self.audio_lookahead,
-                                     plate_start=self.plate_start)
+                                     plate_start=self.plate_start, samples=s.config.samples)
             h, w = self.live.shape
             c = self.live.renderer.channels  # 4 for a bank with transparency
             self._frame = np.empty((h, w, c), np.uint8)

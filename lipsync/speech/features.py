@@ -1,0 +1,134 @@
+"""Per video frame audio features: what the speech sounds like at each frame's time.
+
+For the audio-driven lip target (:mod:`lipsync.samples.lipmodel`): the samples are cut into
+25 ms Hann windows every 10 ms (:data:`WINDOW`, :data:`HOP`), each window gives
+:data:`MELS` log mel-band energies, its log energy and a voicing degree (the normalised
+autocorrelation's peak at a pitch lag, over the window's); video frame ``i`` (time ``i / fps`` to
+``(i + 1) / fps``) takes the mean of the windows centred in its span. :func:`normalised`
+removes each column's mean and scales it by its standard deviation over the utterance (so a
+louder recording or another voice gives features on the same scale) and :func:`stacked`
+puts each frame's neighbours beside it (the lips lead and trail the sound).
+
+Examples
+--------
+>>> import numpy as np
+>>> sr = 16000
+>>> pcm = np.zeros(sr, np.float32)
+>>> pcm[8000:12000] = 0.5 * np.sin(2 * np.pi * 440 * np.arange(4000) / sr)
+>>> f = frame_features(pcm, sr, fps=25)
+>>> f.shape, int(np.argmax(f[:, ENERGY])) in range(12, 19)
+((25, 26), True)
+"""
+
+from __future__ import annotations
+
+from typing import Optional
+
+import numpy as np
+
+#: Analysis window and hop, seconds: the usual speech analysis frame (25 ms holds two to
+#: three pitch periods of a low voice; 10 ms steps resolve a plosive's burst).
+WINDOW, HOP = 0.025, 0.010
+#: Mel bands and their range, Hz: 24 bands (as many as a 16 kHz speech front end keeps)
+#: from 100 Hz (above mains hum) to 7600 Hz (below 16 kHz's Nyquist).
+MELS, FMIN, FMAX = 24, 100.0, 7600.0
+#: Columns: the mel bands, then log energy, then voicing.
+ENERGY, VOICING = MELS, MELS + 1
+#: Pitch lags searched for voicing, Hz: a low man's voice to a child's (lags up to half the
+#: window: beyond it the window's own autocorrelation is too small to divide by).
+PITCH = (80.0, 400.0)
+#: Power floor under the logs (a digital silence gives finite features).
+FLOOR = 1e-10
+
+
+def _mel(hz):
+    return 2595.0 * np.log10(1.0 + np.asarray(hz, np.float64) / 700.0)
+
+
+def mel_filters(sample_rate: int, nfft: int, bands: int = MELS) -> np.ndarray:
+    """``(bands, nfft // 2 + 1)`` triangular mel filters (HTK's mel scale, peaks of 1).
+
+    Examples
+    --------
+    >>> m = mel_filters(16000, 512, 24)
+    >>> m.shape, bool((m.sum(axis=1) > 0).all())
+    ((24, 257), True)
+    """
+    top = min(FMAX, sample_rate / 2.0)
+    edges = 700.0 * (10 ** (np.linspace(_mel(FMIN), _mel(top), bands + 2) / 2595.0) - 1.0)
+    hz = np.arange(nfft // 2 + 1) * sample_rate / nfft
+    lo, mid, hi = edges[:-2, None], edges[1:-1, None], edges[2:, None]
+    return np.maximum(0.0, np.minimum((hz - lo) / (mid - lo), (hi - hz) / (hi - mid)))
+
+
+def frame_features(pcm: np.ndarray, sample_rate: int, fps: float, frames: Optional[int] = None) -> np.ndarray:
+    """``(frames, MELS + 2)`` float64: per video frame the log mel energies, log energy and
+    voicing of ``pcm`` (int16, or floats in -1..1) averaged over the frame's span; frames
+    past the sound's end (``frames`` longer than it) repeat silence's features.
+
+    Examples
+    --------
+    >>> frame_features(np.zeros(1600, np.int16), 16000, fps=25, frames=6).shape
+    (6, 26)
+    """
+    x = np.asarray(pcm)
+    x = x.astype(np.float64) / 32768.0 if x.dtype.kind in "iu" else x.astype(np.float64)
+    win, hop = int(round(WINDOW * sample_rate)), int(round(HOP * sample_rate))
+    n = int(frames) if frames is not None else int(np.ceil(len(x) / sample_rate * fps))
+    need = int(np.ceil(n / fps * sample_rate)) + win
+    x = np.pad(x, (win // 2, max(0, need - len(x))))  # window k centred at sample k * hop
+    count = max(1, (len(x) - win) // hop + 1)
+    idx = np.arange(count)[:, None] * hop + np.arange(win)[None, :]
+    seg = x[idx]
+    seg = np.diff(seg, axis=1, prepend=seg[:, :1]) * 0.97 + seg * 0.03  # pre-emphasis, per window
+    nfft = 1 << int(np.ceil(np.log2(win)))
+    spec = np.fft.rfft(seg * np.hanning(win), n=2 * nfft)  # doubled: the autocorrelation does not wrap
+    power = np.abs(spec) ** 2
+    mel = np.log(power[:, ::2] @ mel_filters(sample_rate, nfft).T + FLOOR)
+    energy = np.log(power.sum(axis=1) / (2 * nfft) + FLOOR)
+    ac = np.fft.irfft(power, axis=1)
+    # over the window's own autocorrelation (Boersma 1993): a periodic sound scores near 1
+    # whatever its lag, where the bare Hann-windowed peak falls with the lag
+    wac = np.fft.irfft(np.abs(np.fft.rfft(np.hanning(win), n=2 * nfft)) ** 2)
+    lags = slice(int(sample_rate / PITCH[1]), min(int(sample_rate / PITCH[0]), win // 2) + 1)
+    voicing = np.clip((ac[:, lags] / wac[lags]).max(axis=1) * wac[0] / np.maximum(ac[:, 0], FLOOR), 0.0, 1.0)
+    per_window = np.c_[mel, energy, voicing]
+    which = np.floor(np.arange(count) * hop / sample_rate * fps).astype(np.int64)
+    keep = which < n
+    out = np.zeros((n, per_window.shape[1]))
+    np.add.at(out, which[keep], per_window[keep])
+    got = np.bincount(which[keep], minlength=n).astype(np.float64)
+    empty = got == 0
+    out[~empty] /= got[~empty, None]
+    if empty.any():  # a frame shorter than a hop: its nearest window's
+        near = np.minimum(np.round(np.nonzero(empty)[0] / fps * sample_rate / hop).astype(np.int64), count - 1)
+        out[empty] = per_window[near]
+    return out
+
+
+def normalised(features: np.ndarray) -> np.ndarray:
+    """Each column less its mean over the rows, over its standard deviation (a flat column: 0).
+
+    Examples
+    --------
+    >>> normalised(np.array([[1.0, 5.0], [3.0, 5.0]])).tolist()
+    [[-1.0, 0.0], [1.0, 0.0]]
+    """
+    f = np.asarray(features, np.float64)
+    sd = f.std(axis=0)
+    return (f - f.mean(axis=0)) / np.where(sd > 1e-9, sd, np.inf)
+
+
+def stacked(features: np.ndarray, context: int) -> np.ndarray:
+    """``(T, D * (2 * context + 1))``: each row with the rows ``-context .. +context`` from it
+    beside it (the first and last rows repeated past the ends).
+
+    Examples
+    --------
+    >>> stacked(np.array([[1.0], [2.0], [3.0]]), 1).tolist()
+    [[1.0, 1.0, 2.0], [1.0, 2.0, 3.0], [2.0, 3.0, 3.0]]
+    """
+    f = np.asarray(features, np.float64)
+    t = len(f)
+    rows = np.clip(np.arange(t)[:, None] + np.arange(-context, context + 1)[None, :], 0, max(t - 1, 0))
+    return f[rows].reshape(t, -1)
