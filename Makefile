@@ -18,8 +18,12 @@ $(STAMP): pyproject.toml setup.py lipsync/morphing/_flowkernel.c
 
 install: $(STAMP)
 
+# On both cores of CI's machine (pytest-xdist). --dist loadfile: a test file runs whole in
+# one worker, so its module fixtures are made once and its tests keep their order;
+# tests/conftest.py orders the heaviest files first (xdist's own reorder, by test count, off). TEST_WORKERS=0 runs in one process.
+TEST_WORKERS ?= 2
 test: $(STAMP)
-	$(BIN)/python -m pytest -q -p no:cacheprovider
+	$(BIN)/python -m pytest -q -p no:cacheprovider -n $(TEST_WORKERS) --dist loadfile --no-loadscope-reorder
 
 demo: $(STAMP)
 	$(BIN)/lipsync render samples/hello.phn --audio samples/hello.wav -o demo.mp4
