@@ -9,7 +9,10 @@ on the bank's plate from the same bank:
 * **offline samples** -- ``lipsync render`` of the clip's alignment (its audio and
   transcript through the aligner), samples on;
 * **live samples** -- ``lipsync render AUDIO --live`` (the audio fed in 20 ms chunks, the
-  phone loop's phones, each frame and its sample fixed 200 ms after its time), samples on;
+  phone loop's phones, each frame and its sample fixed 200 ms after its time), samples on:
+  the windows' targets blend in the bank's audio lip model's prediction from the audio
+  heard (:data:`lipsync.live.samples.LIVE_AUDIO_SHARE`);
+* **live samples, no audio target** -- the same with the phones' target alone (share 0);
 * **live old morph** -- the same, ``--samples off`` (one picture per viseme, morphed);
 * **live samples, aligned phones** -- the alignment's phones pushed one by one and each
   frame taken as soon as the data reaches 200 ms past it: the selection's own look-ahead
@@ -37,7 +40,8 @@ from . import FIGURES, Context
 from . import grid
 
 #: The renderings compared, in the order printed.
-METHODS = ("offline samples", "live samples", "live old morph", "live samples, aligned phones")
+METHODS = ("offline samples", "live samples", "live samples, no audio target", "live old morph",
+           "live samples, aligned phones")
 #: The judged sentences: held_out()[:18] (lipsync.bench.samples.TUNED_FROM: the rest tuned the selection).
 JUDGED = 18
 
@@ -55,11 +59,17 @@ def _offline(bank, clip: str, fps: float) -> List[np.ndarray]:
     return [anim.frame(i).copy() for i in range(len(anim))]
 
 
-def _live_clip(bank, pcm, fps: float, samples: str) -> List[np.ndarray]:
+def _live_clip(bank, pcm, fps: float, samples: str, audio_target: bool = True) -> List[np.ndarray]:
+    from ..live import samples as LS
     from ..pipeline.liveclip import LiveClip
 
-    anim = LiveClip(bank, pcm, fps=fps, samples=samples)
-    return [anim.frame(i).copy() for i in range(len(anim))]
+    keep = LS.LIVE_AUDIO_SHARE
+    LS.LIVE_AUDIO_SHARE = keep if audio_target else 0.0
+    try:
+        anim = LiveClip(bank, pcm, fps=fps, samples=samples)
+        return [anim.frame(i).copy() for i in range(len(anim))]
+    finally:
+        LS.LIVE_AUDIO_SHARE = keep
 
 
 def _live_aligned(bank, clip: str, fps: float, lag: float) -> List[np.ndarray]:
@@ -79,8 +89,19 @@ def _live_aligned(bank, clip: str, fps: float, lag: float) -> List[np.ndarray]:
     return out
 
 
-def _session_cost(bank, pcm, fps: float, samples: str) -> Dict[str, float]:
+def _session_cost(bank, pcm, fps: float, samples: str, audio_target: bool = True) -> Dict[str, float]:
     """CPU ms per frame of a live audio session: audio processing, render; the selection's windows."""
+    from ..live import samples as LS
+
+    keep = LS.LIVE_AUDIO_SHARE
+    LS.LIVE_AUDIO_SHARE = keep if audio_target else 0.0
+    try:
+        return _session_run(bank, pcm, fps, samples)
+    finally:
+        LS.LIVE_AUDIO_SHARE = keep
+
+
+def _session_run(bank, pcm, fps: float, samples: str) -> Dict[str, float]:
     from ..live import LiveAnimator
     from ..live.audio import BLOCK, RATE
 
@@ -124,7 +145,7 @@ def live_samples_figures(ctx: Context, rows: List[dict]) -> None:
     mesh = FaceMesh()
     clips = grid.held_out()[:JUDGED][: 6 if ctx.quick else JUDGED]
     r: Dict[str, List[float]] = {m: [] for m in METHODS}
-    cost = {"on": [], "off": []}
+    cost = {"on": [], "on, no audio target": [], "off": []}
     threads = cv2.getNumThreads()
     for clip in clips:
         fps = grid.track(clip).fps
@@ -134,6 +155,7 @@ def live_samples_figures(ctx: Context, rows: List[dict]) -> None:
             warnings.simplefilter("ignore")
             made = {"offline samples": _offline(bank, clip, fps),
                     "live samples": _live_clip(bank, pcm, fps, "on"),
+                    "live samples, no audio target": _live_clip(bank, pcm, fps, "on", audio_target=False),
                     "live old morph": _live_clip(bank, pcm, fps, "off"),
                     "live samples, aligned phones": _live_aligned(bank, clip, fps, AUDIO_LOOKAHEAD_S)}
         for m, frames in made.items():
@@ -142,13 +164,15 @@ def live_samples_figures(ctx: Context, rows: List[dict]) -> None:
             r[m].append(grid.correlation(M.lip_opening(tr.points), real[:n]))
         cv2.setNumThreads(1)
         try:
-            for opt in ("on", "off"):          # side by side, the same audio
-                cost[opt].append(_session_cost(bank, pcm, fps, opt))
+            for opt in cost:          # side by side, the same audio
+                cost[opt].append(_session_cost(bank, pcm, fps, opt.split(",")[0], audio_target="no audio" not in opt))
         finally:
             cv2.setNumThreads(threads)
     for m in METHODS:
         rows.append({"figure": "live_samples", "case": m, "sentences": len(clips),
                      "lip_r_mean": round(float(np.mean(r[m])), 3), "lip_r_median": round(float(np.median(r[m])), 3)})
+    rows.append({"figure": "live_samples", "case": "live samples: audio target - phones' target alone",
+                 "lip_r_mean": round(float(np.mean(r["live samples"]) - np.mean(r["live samples, no audio target"])), 3)})
     rows.append({"figure": "live_samples", "case": "gap offline - live samples",
                  "lip_r_mean": round(float(np.mean(r["offline samples"]) - np.mean(r["live samples"])), 3)})
     _cost_rows(cost, rows)
@@ -163,15 +187,20 @@ def _cost_rows(cost, rows: List[dict]) -> None:
         rows.append({"figure": "live_samples", "case": f"CPU per frame, samples {opt}", "frames": frames,
                      "audio_ms": round(per[opt]["feed"], 2), "render_ms": round(per[opt]["render"], 2),
                      "total_ms": round(per[opt]["total"], 2)})
-    on = cost["on"]
-    windows = sum(c["windows"] for c in on)
-    rows.append({"figure": "live_samples", "case": "selection", "windows": windows,
-                 "ms_per_window": round(1000 * sum(c["select"] for c in on) / windows, 2),
-                 "frames_per_window": round(sum(c["window_frames"] for c in on) / windows, 1),
-                 "ms_per_frame": round(1000 * sum(c["select"] for c in on) / sum(c["frames"] for c in on), 2)})
+    for opt in ("on", "on, no audio target"):
+        on = cost[opt]
+        windows = sum(c["windows"] for c in on)
+        rows.append({"figure": "live_samples", "case": "selection" + ("" if opt == "on" else ", no audio target"),
+                     "windows": windows,
+                     "ms_per_window": round(1000 * sum(c["select"] for c in on) / windows, 2),
+                     "frames_per_window": round(sum(c["window_frames"] for c in on) / windows, 1),
+                     "ms_per_frame": round(1000 * sum(c["select"] for c in on) / sum(c["frames"] for c in on), 2)})
     rows.append({"figure": "live_samples", "case": "ratio samples on / off",
                  "render": round(per["on"]["render"] / per["off"]["render"], 2),
                  "total": round(per["on"]["total"] / per["off"]["total"], 2)})
+    rows.append({"figure": "live_samples", "case": "ratio audio target on / off (samples on)",
+                 "audio": round(per["on"]["feed"] / per["on, no audio target"]["feed"], 2),
+                 "total": round(per["on"]["total"] / per["on, no audio target"]["total"], 2)})
 
 
 FIGURES.register("live_samples", live_samples_figures)

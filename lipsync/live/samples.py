@@ -45,6 +45,15 @@ from ..motion.frames import frame_count
 #: within a phone need the phone's start; older phones do not change the window's targets,
 #: and leaving them out keeps a window's cost independent of how long the session has run.
 CONTEXT_S = 1.0
+#: Share of a live window's target opening taken from the speech's own prediction (the
+#: bank's audio lip model, :mod:`lipsync.samples.lipmodel`) when the session is fed audio;
+#: offline's is lipsync.selection.select.AUDIO_SHARE. Chosen on held_out()[18:30] (see
+#: lipsync.bench.live_samples; 12 sentences, grid-s1's bank, ``render --live`` sessions fed
+#: the clip's audio): the chosen samples' opening (joins blended as shown) had r 0.628
+#: without the prediction, 0.705 / 0.721 / 0.738 / 0.747 / 0.740 / 0.708 at share 0.3 / 0.4
+#: / 0.5 / 0.6 / 0.7 / 1. More than offline's 0.3: the live phones come from the phone loop
+#: (no transcript) and err more, the sound's prediction does not depend on them.
+LIVE_AUDIO_SHARE = 0.6
 #: Banks' samples kept decoded in this process for live sessions (each is the bank's crops,
 #: ~20 MB for grid-s1's).
 KEEP_BANKS = 2
@@ -141,9 +150,42 @@ class LiveSamples:
     def __init__(self, shared: SharedSamples, fps: float, params=None):
         from ..selection import Incremental
 
+        from ..samples.lipmodel import LipModel
+
         self.shared = shared
         self.fps = float(fps)
         self.selection = Incremental(shared.selector, fps, params)
+        #: The bank's audio lip model (None: the phones' target alone).
+        self.model = LipModel.from_table(shared.samples.table)
+        #: The fed audio's features (:meth:`hear`; None until audio comes or without a model).
+        self.features = None
+
+    def hear(self, pcm: np.ndarray, sample_rate: int = 16000) -> None:
+        """Audio the session was fed (its 16 kHz blocks, in order): its features are kept
+        for the windows' targets (nothing without a lip model or with share 0)."""
+        from ..speech.features import RunningFeatures
+
+        if self.model is None or LIVE_AUDIO_SHARE <= 0:
+            return
+        if self.features is None:
+            self.features = RunningFeatures(sample_rate, self.fps)
+        self.features.add(pcm)
+
+    def prediction(self, a: int, b: int) -> Optional[np.ndarray]:
+        """``(b - a, 2)``: the opening and width the lip model predicts for frames ``a .. b - 1``
+        from the audio heard (features normalised by the running statistics; a frame's
+        context past the last final frame repeats it, as offline at an utterance's end);
+        None before any frame is final."""
+        f = self.features
+        if f is None or len(f) == 0 or b <= a:
+            return None
+        ctx = self.model.context
+        lo, hi = max(0, a - ctx), min(len(f), b + ctx)
+        if lo >= hi:
+            lo = hi - 1
+        rows = f.normalised(lo, hi)
+        at = np.clip(np.arange(a, b)[:, None] + np.arange(-ctx, ctx + 1)[None, :], lo, hi - 1) - lo
+        return rows[at].reshape(b - a, -1) @ self.model.weights + self.model.bias
 
     def __len__(self) -> int:
         return len(self.selection)
@@ -173,7 +215,9 @@ class LiveSamples:
         segs = tuple(Segment(max(0.0, s - off), e - off, lab) for s, e, lab in phones
                      if e > off and e - off > max(0.0, s - off))
         tl = Timeline(segs, kind=kind)
-        return self.selection.fix(specs_of(b, stop), tl, b, key)
+        specs = specs_of(b, stop)
+        audio = self.prediction(b, b + len(specs))
+        return self.selection.fix(specs, tl, b, key, audio, LIVE_AUDIO_SHARE if audio is not None else 0.0)
 
     def shows(self, n: int) -> Tuple[int, int, float]:
         """``(src, dst, alpha)`` of fixed frame ``n``."""

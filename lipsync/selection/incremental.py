@@ -139,7 +139,8 @@ class Incremental:
             raise IndexError(f"frame {n} is not fixed ({self.first}..{len(self) - 1})")
         return self.path[n - self.first]
 
-    def fix(self, specs: Sequence, timeline, base: int, key: Hashable) -> int:
+    def fix(self, specs: Sequence, timeline, base: int, key: Hashable, audio: Optional[np.ndarray] = None,
+            share: float = 0.0) -> int:
         """Fix the next frame, ``c = len(self)``, and return its sample.
 
         Parameters
@@ -154,19 +155,23 @@ class Incremental:
             context: the phones' dominance reaches back).
         key : hashable
             What the data is: while it is the same and the plan covers frame c, the plan's
-            frame is fixed without a new programme.
+            frame is fixed without a new programme (``audio`` must then be the same too).
+        audio : ndarray, optional
+            ``(len(specs), 2)``: the opening and width the speech predicts for the window's
+            frames (:class:`lipsync.live.samples.LiveSamples`), blended into the target's
+            opening by ``share`` as :func:`~lipsync.selection.select.with_audio` does offline.
         """
         c = len(self)
         if not (base <= c < base + len(specs)):
             raise ValueError(f"frame {c} is not in the window {base}..{base + len(specs) - 1}")
         if self.plan is None or self.plan.key != key or not self.plan.covers(c):
-            self.plan = self._window(specs, timeline, base, key)
+            self.plan = self._window(specs, timeline, base, key, audio, share)
         k = c - self.plan.first
         self.path.append(int(self.plan.ids[k]))
         self.exact.append(bool(self.plan.exact[k]))
         return self.path[-1]
 
-    def _window(self, specs, timeline, base: int, key) -> Plan:
+    def _window(self, specs, timeline, base: int, key, audio=None, share: float = 0.0) -> Plan:
         """The cheapest path over frames ``c .. base + len(specs) - 1`` from the fixed frame ``c - 1``."""
         from .select import make_target
 
@@ -174,6 +179,8 @@ class Incremental:
         sel = self.selector
         c = len(self)
         tg = make_target(self._samples, specs, timeline, self.fps, self._pmap, sel.rest, sel.closures, self.params)
+        if audio is not None and share > 0 and len(specs):
+            tg = heard(tg, audio, share)
         codes = tuple(sel.encode(x) for x in (tg.phone, tg.prev, tg.next, tg.viseme))
         v = Viterbi()
         if self.path:   # the start constraint: the sample already shown
@@ -199,3 +206,17 @@ class Incremental:
         src, dst, alpha = frame_plan(np.array(self.path[lo:hi], np.int64), self.selector.succ,
                                      np.array(self.exact[lo:hi], bool), join_frames)
         return int(src[-1]), int(dst[-1]), float(alpha[-1])
+
+
+def heard(tg, audio: np.ndarray, share: float):
+    """Target ``tg`` with the speech's predicted opening (``audio``, ``(frames, 2)``) blended
+    in by ``share``: :func:`~lipsync.selection.select.with_audio`'s rule (the prediction's
+    excursion scaled by ``AUDIO_GAIN``, the opening term weighed ``AUDIO_OPEN_WEIGHT``) with
+    a share of the caller's (a live session's phones are not the offline alignment's)."""
+    from dataclasses import replace
+
+    from . import select as S
+
+    a = np.asarray(audio, np.float64)[:len(tg.opening), 0]
+    a = a.mean() + S.AUDIO_GAIN * (a - a.mean())
+    return replace(tg, opening=(1.0 - share) * tg.opening + share * a, open_weight=S.AUDIO_OPEN_WEIGHT)

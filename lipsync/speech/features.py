@@ -79,7 +79,30 @@ def frame_features(pcm: np.ndarray, sample_rate: int, fps: float, frames: Option
     x = np.pad(x, (win // 2, max(0, need - len(x))))  # window k centred at sample k * hop
     count = max(1, (len(x) - win) // hop + 1)
     idx = np.arange(count)[:, None] * hop + np.arange(win)[None, :]
-    seg = x[idx]
+    per_window = window_features(x[idx], sample_rate)
+    which = np.floor(np.arange(count) * hop / sample_rate * fps).astype(np.int64)
+    keep = which < n
+    out = np.zeros((n, per_window.shape[1]))
+    np.add.at(out, which[keep], per_window[keep])
+    got = np.bincount(which[keep], minlength=n).astype(np.float64)
+    empty = got == 0
+    out[~empty] /= got[~empty, None]
+    if empty.any():  # a frame shorter than a hop: its nearest window's
+        near = np.minimum(np.round(np.nonzero(empty)[0] / fps * sample_rate / hop).astype(np.int64), count - 1)
+        out[empty] = per_window[near]
+    return out
+
+
+def window_features(seg: np.ndarray, sample_rate: int) -> np.ndarray:
+    """``(count, MELS + 2)``: the log mel energies, log energy and voicing of each row of
+    ``seg`` (``(count, window)`` float samples: one analysis window each).
+
+    Examples
+    --------
+    >>> window_features(np.zeros((3, 400)), 16000).shape
+    (3, 26)
+    """
+    win = seg.shape[1]
     seg = np.diff(seg, axis=1, prepend=seg[:, :1]) * 0.97 + seg * 0.03  # pre-emphasis, per window
     nfft = 1 << int(np.ceil(np.log2(win)))
     spec = np.fft.rfft(seg * np.hanning(win), n=2 * nfft)  # doubled: the autocorrelation does not wrap
@@ -92,18 +115,7 @@ def frame_features(pcm: np.ndarray, sample_rate: int, fps: float, frames: Option
     wac = np.fft.irfft(np.abs(np.fft.rfft(np.hanning(win), n=2 * nfft)) ** 2)
     lags = slice(int(sample_rate / PITCH[1]), min(int(sample_rate / PITCH[0]), win // 2) + 1)
     voicing = np.clip((ac[:, lags] / wac[lags]).max(axis=1) * wac[0] / np.maximum(ac[:, 0], FLOOR), 0.0, 1.0)
-    per_window = np.c_[mel, energy, voicing]
-    which = np.floor(np.arange(count) * hop / sample_rate * fps).astype(np.int64)
-    keep = which < n
-    out = np.zeros((n, per_window.shape[1]))
-    np.add.at(out, which[keep], per_window[keep])
-    got = np.bincount(which[keep], minlength=n).astype(np.float64)
-    empty = got == 0
-    out[~empty] /= got[~empty, None]
-    if empty.any():  # a frame shorter than a hop: its nearest window's
-        near = np.minimum(np.round(np.nonzero(empty)[0] / fps * sample_rate / hop).astype(np.int64), count - 1)
-        out[empty] = per_window[near]
-    return out
+    return np.c_[mel, energy, voicing]
 
 
 def normalised(features: np.ndarray) -> np.ndarray:
@@ -132,3 +144,101 @@ def stacked(features: np.ndarray, context: int) -> np.ndarray:
     t = len(f)
     rows = np.clip(np.arange(t)[:, None] + np.arange(-context, context + 1)[None, :], 0, max(t - 1, 0))
     return f[rows].reshape(t, -1)
+
+
+class RunningFeatures:
+    """:func:`frame_features` of a stream, computed as its audio arrives, and their running
+    mean and standard deviation (for a live session: no frame is computed twice).
+
+    Each analysis window is computed once, when the audio reaches its end; a frame's row is
+    final once its last window is (the last window centred in the frame ends half a window
+    after its centre: at 25 fps, 2.5 ms after the frame's end). The rows are
+    the offline rows of the same audio (the same windows, averaged the same way).
+    :meth:`normalised` scales rows by the mean and standard deviation of every row final so
+    far: over the whole utterance, once it has all been heard, exactly
+    :func:`normalised`'s; before that, the statistics of what has been heard.
+
+    Parameters
+    ----------
+    sample_rate : int
+    fps : float
+
+    Examples
+    --------
+    >>> sr = 16000
+    >>> pcm = np.random.default_rng(0).integers(-3000, 3000, sr).astype(np.int16)
+    >>> run = RunningFeatures(sr, 25)
+    >>> for i in range(0, sr, 320):
+    ...     run.add(pcm[i:i + 320])
+    >>> run.finish(25)
+    >>> bool(np.allclose(run.normalised(0, 25), normalised(frame_features(pcm, sr, 25)), atol=1e-9))
+    True
+    """
+
+    def __init__(self, sample_rate: int, fps: float):
+        self.sr, self.fps = int(sample_rate), float(fps)
+        self.win, self.hop = int(round(WINDOW * self.sr)), int(round(HOP * self.sr))
+        self._buf = np.zeros(self.win // 2)   # padded samples from window self._k's start on
+        self._k = 0                           # the next window to compute
+        self._rows = np.zeros((256, MELS + 2))
+        self._sum = np.zeros(MELS + 2)       # of the rows in the frame being filled
+        self._got = 0
+        self._frame = 0                      # the frame being filled (rows before it are final)
+        self._s1 = np.zeros(MELS + 2)        # sums over the final rows (running statistics)
+        self._s2 = np.zeros(MELS + 2)
+
+    def __len__(self) -> int:
+        """Frames whose row is final."""
+        return self._frame
+
+    def _which(self, k: np.ndarray) -> np.ndarray:
+        return np.floor(k * self.hop / self.sr * self.fps).astype(np.int64)   # as frame_features
+
+    def add(self, pcm: np.ndarray) -> None:
+        """More samples (int16, or floats in -1..1, at ``sample_rate``)."""
+        x = np.asarray(pcm)
+        x = x.astype(np.float64) / 32768.0 if x.dtype.kind in "iu" else x.astype(np.float64)
+        self._buf = np.concatenate([self._buf, x])
+        count = (len(self._buf) - self.win) // self.hop + 1
+        if count <= 0:
+            return
+        idx = np.arange(count)[:, None] * self.hop + np.arange(self.win)[None, :]
+        per_window = window_features(self._buf[idx], self.sr)
+        which = self._which(np.arange(self._k, self._k + count))
+        for row, f in zip(per_window, which):
+            while f > self._frame:   # the frame is complete: its row is final
+                self._close()
+            self._sum += row
+            self._got += 1
+        self._k += count
+        self._buf = self._buf[count * self.hop:]
+        while self._which(np.array([self._k]))[0] > self._frame:   # no later window is this frame's
+            self._close()
+
+    def _close(self) -> None:
+        if self._frame >= len(self._rows):
+            self._rows = np.vstack([self._rows, np.zeros_like(self._rows)])
+        if self._got:
+            row = self._sum / self._got
+        else:   # a frame shorter than a hop: the window after it (frame_features takes the nearest)
+            row = self._rows[self._frame - 1] if self._frame else np.zeros(MELS + 2)
+        self._rows[self._frame] = row
+        self._s1 += row
+        self._s2 += row * row
+        self._sum = np.zeros(MELS + 2)
+        self._got = 0
+        self._frame += 1
+
+    def finish(self, frames: int) -> None:
+        """The audio has ended: the stream's first ``frames`` rows are made final (the sound
+        continued by silence, as :func:`frame_features` pads it)."""
+        while len(self) < frames:
+            self.add(np.zeros(self.hop))
+
+    def normalised(self, a: int, b: int) -> np.ndarray:
+        """Rows ``a .. b - 1`` (final ones) less the running mean, over the running standard
+        deviation (a flat column: 0)."""
+        n = max(len(self), 1)
+        mean = self._s1 / n
+        sd = np.sqrt(np.maximum(self._s2 / n - mean * mean, 0.0))
+        return (self._rows[a:b] - mean) / np.where(sd > 1e-9, sd, np.inf)
