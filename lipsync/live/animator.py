@@ -486,9 +486,11 @@ class LiveAnimator:
                 raise InputError("the audio has ended (finish_audio or close was called); start a new animator")
             if self._fe is None:
                 self._fe = AudioFrontEnd()
+                if self.samples is not None:   # its blocks also feed the samples' audio lip target
+                    self._fe.on_block = self.samples.hear
             self._fe.add(samples, sample_rate)
             due: List[int] = []
-            while self._step_audio():   # one block at a time: the state after each is the same for any chunking
+            while self._fe.step():   # one block at a time: the state after each is the same for any chunking
                 self._tail = None
                 self._version += 1
                 self._commit(self._fe.frames - self._commit_frames())
@@ -500,19 +502,6 @@ class LiveAnimator:
                     self._fix(n)
                     due.append(n)
             return due
-
-    def _step_audio(self) -> bool:
-        """The front-end's next whole block, its 16 kHz samples also heard by the session's
-        samples (their audio lip target); False when no whole block has come."""
-        from .audio import BLOCK
-
-        fe = self._fe
-        block = fe._pending[:BLOCK].astype(np.int16) if self.samples is not None and len(fe._pending) >= BLOCK else None
-        if not fe.step():
-            return False
-        if block is not None:
-            self.samples.hear(block)
-        return True
 
     def finish_audio(self) -> List[int]:
         """The audio has ended: decide its last phones and deliver every remaining frame.
@@ -549,12 +538,9 @@ class LiveAnimator:
         with self._state:
             if self._fe is None or self._finished or self._closed:
                 return []
-            left = self._fe._pending.astype(np.int16) if self.samples is not None else None
-            self._fe.end()
-            if left is not None:   # the last partial block (the lip model's features end with silence)
-                self.samples.hear(left)
-                if self.samples.features is not None:
-                    self.samples.features.finish(frame_count(self._fe.duration, self.fps))
+            self._fe.end()   # its last block, completed with silence, reaches the samples too
+            if self.samples is not None and self.samples.features is not None:
+                self.samples.features.finish(frame_count(self._fe.duration, self.fps))
             self._tail = None
             self._version += 1
             self._commit(self._fe.frames, flush=True)

@@ -33,7 +33,7 @@ Examples
 from __future__ import annotations
 
 import math
-from typing import List, Optional, Tuple
+from typing import Callable, List, Optional, Tuple
 
 import numpy as np
 
@@ -255,6 +255,9 @@ class AudioFrontEnd:
         self._closed_since: Optional[int] = None   # frame since which the gate is closed
         self.samples_in = 0
         self.ended = False
+        #: Called with each 16 kHz int16 block as it is processed (the silence that completes
+        #: the last one included), e.g. a session's audio lip target; None for none.
+        self.on_block: Optional[Callable[[np.ndarray], None]] = None
 
     def _set_rate(self, rate) -> None:
         if isinstance(rate, bool) or not isinstance(rate, (int, np.integer)) and not (
@@ -330,6 +333,8 @@ class AudioFrontEnd:
         block = self._pending[:BLOCK].astype(np.int16)
         self._pending = self._pending[BLOCK:]
         self._block(block)
+        if self.on_block is not None:
+            self.on_block(block)
         return True
 
     def feed(self, samples, rate: Optional[int] = None) -> List[int]:
