@@ -38,6 +38,7 @@ from typing import Callable, List, Optional, Sequence, Tuple
 
 import numpy as np
 
+from ..samples import samples_wanted
 from ..motion.frames import frame_count
 
 #: Phones before a window kept as its target's context: the dominance model reaches back
@@ -60,26 +61,6 @@ KEEP_BANKS = 2
 
 _SHARED: dict = {}
 _LOCK = threading.Lock()
-
-
-def samples_wanted(option) -> Optional[bool]:
-    """``samples`` as True, False or None (the bank decides), as ``--samples on|off``.
-
-    Examples
-    --------
-    >>> samples_wanted("off"), samples_wanted(None), samples_wanted("on")
-    (False, None, True)
-    """
-    if option is None or isinstance(option, bool):
-        return option
-    text = str(option).strip().lower()
-    if text in ("on", "true", "yes", "1"):
-        return True
-    if text in ("off", "false", "no", "0"):
-        return False
-    from ..errors import InputError
-
-    raise InputError(f"samples must be on or off, got {option!r}")
 
 
 class SharedSamples:

@@ -26,6 +26,8 @@ from typing import Optional
 
 import numpy as np
 
+from ..samples import samples_wanted
+
 #: Banks' samples kept decoded in this process (a serve or a batch worker renders many
 #: clips of a few banks; each is the bank's crops, ~20 MB for GRID s1's).
 KEEP_BANKS = 2
@@ -33,18 +35,8 @@ _cache: dict = {}
 _lock = threading.Lock()
 
 
-def wanted(option) -> Optional[bool]:
-    """``--samples on|off`` (or True/False/None) as True, False or None (the bank decides)."""
-    if option is None or isinstance(option, bool):
-        return option
-    text = str(option).strip().lower()
-    if text in ("on", "true", "yes", "1"):
-        return True
-    if text in ("off", "false", "no", "0"):
-        return False
-    from ..errors import InputError
-
-    raise InputError(f"--samples must be on or off, got {option!r}")
+#: ``--samples on|off`` as True, False or None (kept under the name callers used).
+wanted = samples_wanted
 
 
 def bank_samples(bank, option=None):

@@ -22,6 +22,6 @@ Examples
 
 from __future__ import annotations
 
-from .store import TABLE_NAME, VIDEO_NAME, Samples, load_samples, read_table
+from .store import TABLE_NAME, VIDEO_NAME, Samples, load_samples, read_table, samples_wanted
 
-__all__ = ["Samples", "load_samples", "read_table", "VIDEO_NAME", "TABLE_NAME"]
+__all__ = ["Samples", "load_samples", "read_table", "samples_wanted", "VIDEO_NAME", "TABLE_NAME"]

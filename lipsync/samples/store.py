@@ -259,3 +259,23 @@ def read_crops(path: Path, n: int) -> np.ndarray:
         raise BankError(f"{'more than ' if got > n else ''}{min(got, n)} sample crops against {n} rows in "
                         f"{TABLE_NAME}", path=path)
     return out
+
+
+def samples_wanted(option) -> Optional[bool]:
+    """``--samples on|off`` (or True/False/None) as True, False or None (the bank decides).
+
+    Examples
+    --------
+    >>> samples_wanted("off"), samples_wanted(None), samples_wanted("on")
+    (False, None, True)
+    """
+    if option is None or isinstance(option, bool):
+        return option
+    text = str(option).strip().lower()
+    if text in ("on", "true", "yes", "1"):
+        return True
+    if text in ("off", "false", "no", "0"):
+        return False
+    from ..errors import InputError
+
+    raise InputError(f"--samples must be on or off, got {option!r}")
