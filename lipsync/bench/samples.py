@@ -37,6 +37,11 @@ AUDIO`` and ``lipsync dub`` do, joins as :data:`lipsync.selection.plan.JOIN_FRAM
 the other sample methods select for the phones' target alone. The dubs' speech is another
 GRID s1 sentence, so the voice is the bank's own speaker's.
 
+**Footage** rows: banks of :data:`FOOTAGE` sentences (the ten bank sentences and the tuning
+ones, :func:`footage_clips`), their target rows on the same judged sentences and, for the
+longest, the judged sentences rendered with the audio target: how lip r grows with the
+footage the samples and the audio lip model come from.
+
 Sharpness per stage: the source crops (the footage's mouth box) against the crops as
 stored (``samples.mp4`` decoded); then, in the lips' box over the held-out real frames, the
 bank's footage (what the samples are cut from), the plate under the render, each method
