@@ -1,0 +1,115 @@
+"""What a long live session with mouth samples costs (``live_samples_cost``), each fix
+measured before and after side by side in one run.
+
+Bank: ``visemes/grid-s1``. Audio: the first held-out GRID s1 sentences
+(:func:`~lipsync.bench.grid.held_out`; 2 with ``--quick``), each fed in 20 ms chunks as
+``lipsync serve`` does, every frame rendered when it falls due.
+
+* **selection medians**: the CPU per frame of the same sessions (OpenCV on one thread,
+  ``time.thread_time``: the audio's processing with the selection, and the render) with
+  each look-ahead window's target recomputing the samples' per-phone medians (before:
+  :data:`lipsync.selection.select.MEMO_MEDIANS` off) and taking them from the per-bank
+  memo (after); the two are run alternately, and their fixed sample paths must be equal.
+* **far jump**: the plate's plan (:class:`~lipsync.composite.plate_time.PlateTimeline`)
+  asked for the frame 24 h in; before, with restarts off, only 10 minutes in (24 h would
+  take minutes: the plan grows to every step on the way), after a restart at the jump
+  (:data:`~lipsync.composite.plate_time.RESTART_S`): steps planned and CPU ms.
+* **audio feature rows**: the bytes of rows a session's
+  :class:`~lipsync.speech.features.RunningFeatures` holds after 10 minutes of audio fed
+  in 20 ms blocks, without trimming (before) and trimmed to what the windows read (after).
+"""
+
+from __future__ import annotations
+
+import time
+import warnings
+from typing import Dict, List
+
+import numpy as np
+
+from . import FIGURES, Context
+from . import grid
+
+
+def _session(bank, pcm, fps: float, memo: bool) -> Dict[str, object]:
+    """One audio session: CPU seconds (this thread) of feeding and of rendering, its frames,
+    its selection's seconds and its fixed path."""
+    from ..live import LiveAnimator
+    from ..live.audio import BLOCK, RATE
+    from ..selection import select as S
+
+    keep = S.MEMO_MEDIANS
+    S.MEMO_MEDIANS = memo
+    try:
+        live = LiveAnimator(bank, fps=fps, prepare=False, samples="on")
+        clock = time.thread_time
+        live.samples.selection.clock = clock
+        feed = render = 0.0
+        frames = 0
+        for i in range(0, len(pcm), BLOCK):
+            t0 = clock()
+            due = live.feed_audio(pcm[i:i + BLOCK], RATE)
+            feed += clock() - t0
+            for n in due:
+                t0 = clock()
+                live.frame(n)
+                render += clock() - t0
+                frames += 1
+        sel = live.samples.selection
+        return {"feed": feed, "render": render, "frames": frames, "select": sel.seconds, "path": list(sel.path)}
+    finally:
+        S.MEMO_MEDIANS = keep
+
+
+def _medians_rows(bank, clips, repeat: int, rows: List[dict]) -> None:
+    from ..speech.audio import load_audio
+
+    got = {False: [], True: []}
+    same = True
+    for clip in clips:
+        pcm = load_audio(str(grid.video(clip)))
+        fps = grid.track(clip).fps
+        for r in range(repeat):
+            order = (False, True) if r % 2 == 0 else (True, False)   # alternate: neither always runs first
+            runs = {m: _session(bank, pcm, fps, m) for m in order}
+            same &= runs[False]["path"] == runs[True]["path"]
+            for m in order:
+                got[m].append(runs[m])
+    for m, name in ((False, "before: medians recomputed per window"), (True, "after: medians memoised per bank")):
+        frames = sum(c["frames"] for c in got[m])
+        rows.append({"figure": "live_samples_cost", "case": name, "frames": frames,
+                     "select_ms": round(1000 * sum(c["select"] for c in got[m]) / frames, 2),
+                     "audio_ms": round(1000 * sum(c["feed"] for c in got[m]) / frames, 2),
+                     "render_ms": round(1000 * sum(c["render"] for c in got[m]) / frames, 2),
+                     "total_ms": round(1000 * sum(c["feed"] + c["render"] for c in got[m]) / frames, 2)})
+    before, after = rows[-2], rows[-1]
+    rows.append({"figure": "live_samples_cost", "case": "ratio after / before",
+                 "select_ms": round(after["select_ms"] / before["select_ms"], 2),
+                 "total_ms": round(after["total_ms"] / before["total_ms"], 2),
+                 "same_paths": bool(same)})
+
+
+def live_samples_cost_figures(ctx: Context, rows: List[dict]) -> None:
+    import cv2
+
+    from .._data import default_bank_dir
+    from ..banks.bank import Bank
+
+    bank_path = default_bank_dir().parent / "grid-s1"
+    if not grid.held_out() or not (bank_path / "samples.npz").is_file():
+        rows.append({"figure": "live_samples_cost", "case": f"skipped: GRID's clips are not in {grid.grid_dir()}"})
+        return
+    bank = Bank.load(bank_path)
+    clips = grid.held_out()[: 2 if ctx.quick else 4]
+    threads = cv2.getNumThreads()
+    cv2.setNumThreads(1)
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            _session(bank, np.zeros(16000, np.int16), 25.0, True)   # warm-up: the bank's samples loaded once
+            _medians_rows(bank, clips, 1 if ctx.quick else 2, rows)
+    finally:
+        cv2.setNumThreads(threads)
+
+
+FIGURES.register("live_samples_cost", live_samples_cost_figures)
