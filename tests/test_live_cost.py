@@ -86,3 +86,51 @@ def test_phone_schedule_from_the_memo_equals_the_medians_afresh(bank, monkeypatc
     # the schedule is lower on B, M and P than on the vowels around them
     at = {p: int((0.16 + 0.12 * k) * 25) for k, p in enumerate(phones)}
     assert max(afresh[0][at[p]] for p in "BMP") < min(afresh[0][at[p]] for p in ("AE1", "OY1"))
+
+
+# --- a far jump of the clock restarts the plate's plan ------------------------------------
+
+def test_a_far_jump_shows_the_restarted_plans_plate_frame_without_planning_the_way(bank):
+    """A session told its clock is 24 h in: the plate's plan restarts near that step (at
+    most RESTART_S of steps planned, where planning the way was 2.16 million steps), and the
+    frame shows the plate frame the restarted plan gives for it, above the mouth exactly."""
+    from lipsync.composite.plate_time import RESTART_S, PlateTimeline
+
+    live = LiveAnimator(bank, fps=25, prepare=False, samples="on")
+    for n in range(5):
+        live.frame(n)
+    line, plate = live._plate_line, live.plate
+    k = int(round(86400 * plate.fps))               # the plate's step at 24 h
+    got = live.frame_at(86400.0)
+    step = int(round(RESTART_S * plate.fps))
+    assert line._seg[0] == k - k % step and line.planned <= step + 2 * len(plate)
+    top = min(plate.compositor.roi(p, plate.frames.shape[1:])[1] for p in plate.poses)
+    assert top > 0.4 * plate.frames.shape[1]
+    j = line.frame(k)
+    assert np.array_equal(got[:top], plate.frames[j][:top])
+    # the restart is a function of the clip's start and the step: another session there agrees
+    other = PlateTimeline(plate.times, start=(live.plate_start * plate.fps / len(plate)) % 1.0).restarting()
+    assert other.frame(k) == j and other.planned == line.planned
+    # and going back to the start plans the plate from the start again: a fresh session's
+    # plate frames (the mouth of a frame before a jump is the morph's rest: never fixed)
+    fresh = LiveAnimator(bank, fps=25, prepare=False, samples="on")
+    assert all(np.array_equal(live.frame(n)[:top], fresh.frame(n)[:top]) for n in (0, 1, 2, 60))
+    assert line._seg[0] == 0
+
+
+def test_ordinary_playback_with_restarts_on_is_the_continuous_plan(bank):
+    """Steps asked in order, some skipped (a player that drops frames) but none by
+    RESTART_S: the plan of a timeline that restarts at far jumps is the continuous one."""
+    from lipsync.composite.plate_time import RESTART_S, PlateTimeline
+
+    live = LiveAnimator(bank, fps=25, prepare=False, samples="off")
+    times = live.plate.times
+    plain = PlateTimeline(times, start=0.37).frames(3000)
+    line = PlateTimeline(times, start=0.37).restarting()
+    skip = int(RESTART_S * times.fps) - 1
+    ahead = np.cumsum(np.random.default_rng(3).choice([1, 1, 1, 2, 7, skip], 120))
+    asked = [0, 1, 2] + [int(k) for k in ahead if k < 3000] + [2999, 1500, 0]     # then back within the plan
+    assert max(np.diff(asked[:-2])) == skip and len(asked) > 40
+    assert [line.frame(k) for k in asked] == plain[asked].tolist()
+    assert line._seg[0] == 0 and 3000 <= line.planned < 3000 + len(live.plate)   # (whole runs)
+    assert len(set(plain.tolist())) > 0.5 * len(live.plate)     # the plan does move over the plate

@@ -89,6 +89,32 @@ def _medians_rows(bank, clips, repeat: int, rows: List[dict]) -> None:
                  "same_paths": bool(same)})
 
 
+def _jump_rows(bank, rows: List[dict]) -> None:
+    """The plate frame at a far step of a session's clock: before (no restart) 10 minutes
+    in, after (restarting) 24 h in; and a near step after each (the next frame)."""
+    from ..composite.plate_time import PlateTimeline
+    from ..live.pool import shared_plate
+
+    plate = shared_plate(bank)
+    times = plate.times
+    clock = time.thread_time
+    for name, restart, seconds in (("before: no restart, jump 10 min", False, 600.0),
+                                   ("after: restart, jump 24 h", True, 86400.0)):
+        line = PlateTimeline(times, start=0.37)
+        if restart:
+            line.restarting()
+        line.frame(3)
+        k = int(round(seconds * plate.fps))
+        t0 = clock()
+        line.frame(k)
+        far = clock() - t0
+        t0 = clock()
+        line.frame(k + 1)
+        near = clock() - t0
+        rows.append({"figure": "live_samples_cost", "case": f"plate plan, {name}", "steps_planned": line.planned,
+                     "jump_ms": round(1000 * far, 2), "next_frame_ms": round(1000 * near, 3)})
+
+
 def live_samples_cost_figures(ctx: Context, rows: List[dict]) -> None:
     import cv2
 
@@ -108,6 +134,7 @@ def live_samples_cost_figures(ctx: Context, rows: List[dict]) -> None:
             warnings.simplefilter("ignore")
             _session(bank, np.zeros(16000, np.int16), 25.0, True)   # warm-up: the bank's samples loaded once
             _medians_rows(bank, clips, 1 if ctx.quick else 2, rows)
+            _jump_rows(bank, rows)
     finally:
         cv2.setNumThreads(threads)
 

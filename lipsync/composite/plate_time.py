@@ -54,7 +54,7 @@ from typing import List, Optional, Tuple
 import numpy as np
 
 __all__ = ["PlateTimes", "PlateTimeline", "default_start", "blink_runs", "upper_face_features",
-           "BLINK_BELOW", "REPEAT_GAP_S"]
+           "BLINK_BELOW", "REPEAT_GAP_S", "RESTART_S"]
 
 #: Eye opening below this share of the plate's median is a blink (or the lids lowered to
 #: read: as visible, and as bad to repeat). The face mesh never lets the lids meet: GRID
@@ -98,6 +98,13 @@ EXITS, JOINS_PER_EXIT = 100, 64
 #: other's nearest: a short list would never leave it).
 NEIGHBOURS = 1500
 _BLOCK = 1024
+#: A live session's plan (:meth:`PlateTimeline.restarting`) asked for a step this many
+#: seconds past its end, or before its start, restarts there rather than planning every
+#: step on the way: planning runs at ~0.2 ms a step, so a clock told it is 24 h in took
+#: minutes, and a viewer who was away that long saw none of the frames between. Restarts
+#: begin on a grid of this many seconds (a frame costs at most so many steps of planning,
+#: ~50 ms), so the same far frame asked twice is the same plate frame.
+RESTART_S = 10.0
 
 
 def blink_runs(eyes: np.ndarray, *, below: float = BLINK_BELOW) -> List[Tuple[int, int]]:
@@ -268,28 +275,81 @@ class PlateTimeline:
         pos = int(np.floor((float(start) % 1.0) * n)) if n else 0
         if n and times.blink_of[pos] >= 0:
             pos = times.spans[times.blink_of[pos]][0]  # never start in the middle of a blink
-        self._plan: List[int] = []
-        self._state = _State(pos=pos, last={})
+        self._start = float(start)
+        self._first_pos = pos
         self._straight = int(straight)
-        self._rng = np.random.default_rng(int(pos) * 7919 + int(default_start(start) * 2 ** 31))
         self._lock = threading.Lock()
-        #: ``(step, from_frame, to_frame, cost)`` of every join made so far.
+        #: Steps past the plan's end (or before its start) that restart it; None: never.
+        self._far: Optional[int] = None
+        #: ``(step, from_frame, to_frame, cost)`` of every join made so far (of the plan since
+        #: its last restart).
         self.joins: List[Tuple[int, int, int, float]] = []
+        self._begin(0)
+
+    def _begin(self, step: int) -> None:
+        """Plan afresh from output step ``step``: step 0 from the clip's start; a restart's
+        step from a place on the plate drawn from the clip's start and the step."""
+        t = self.times
+        if step == 0:
+            pos, seed = self._first_pos, default_start(self._start)
+        else:
+            seed = default_start(self._start, step)
+            pos = int(np.floor(seed * t.n)) if t.n else 0
+            if t.n and t.blink_of[pos] >= 0:
+                pos = t.spans[t.blink_of[pos]][0]
+        # (offset, plan): the plan's first step and its plate frames, swapped as one
+        self._seg: Tuple[int, List[int]] = (int(step), [])
+        self._plan = self._seg[1]
+        self._state = _State(pos=pos, last={})
+        self._rng = np.random.default_rng(int(pos) * 7919 + int(seed * 2 ** 31))
+        self.joins = []
+
+    def restarting(self) -> "PlateTimeline":
+        """This timeline, restarting its plan at a far jump of the clock (:data:`RESTART_S`):
+        a live session's, whose clock may be told any time. Ordinary playback (each step
+        asked after the one before, or within RESTART_S of the plan's end) plays exactly as
+        without; an offline render never restarts (its frames never depend on the order
+        they are asked in).
+
+        Examples
+        --------
+        >>> times = PlateTimes(np.sin(np.arange(50)[:, None] * [[0.3, 0.7]]), np.ones(50), fps=25.0)
+        >>> line = PlateTimeline(times, start=0.5).restarting()
+        >>> j = line.frame(25 * 86400)               # a day in: planned from a restart near it
+        >>> line.planned <= int(RESTART_S * 25), 0 <= j < 50
+        (True, True)
+        """
+        self._far = max(1, int(round(RESTART_S * self.times.fps)))
+        return self
+
+    @property
+    def planned(self) -> int:
+        """Steps planned since the last (re)start: the plan's state."""
+        return len(self._seg[1])
 
     def frame(self, k: int) -> int:
         """The plate frame shown at step ``k`` of the plate's clock."""
-        if k < len(self._plan):
-            return self._plan[k]
+        k = max(int(k), 0)
+        first, plan = self._seg
+        if first <= k < first + len(plan):
+            return plan[k - first]
         with self._lock:
-            while len(self._plan) <= k:
+            first, plan = self._seg
+            if self._far is not None and (k < first or k >= first + len(plan) + self._far):
+                self._begin(k - k % self._far)
+                first, plan = self._seg
+            while first + len(plan) <= k:
                 self._extend()
-        return self._plan[k]
+            return plan[k - first]
 
     def frames(self, count: int) -> np.ndarray:
-        """:meth:`frame` of steps ``0 .. count-1``."""
-        if count:
-            self.frame(count - 1)
-        return np.asarray(self._plan[:count], np.int64)
+        """:meth:`frame` of steps ``0 .. count-1``, planned straight on from step 0."""
+        with self._lock:
+            if self._seg[0] != 0:
+                self._begin(0)
+            while len(self._plan) < count:
+                self._extend()
+            return np.asarray(self._plan[:count], np.int64)
 
     # ------------------------------------------------------------------ planning
 
@@ -328,7 +388,7 @@ class PlateTimeline:
             e, j, c = best
         self._plan.extend(range(st.pos, e + 1))
         st.last = self._blinks_in(st.pos, e, at, st.last)
-        self.joins.append((len(self._plan), e, j, c))
+        self.joins.append((self._seg[0] + len(self._plan), e, j, c))
         st.pos = j
 
     def _blink_due(self, pos: int, at: int, options, last: dict) -> np.ndarray:
@@ -361,7 +421,8 @@ class PlateTimeline:
     def _choose(self, pos: int, at: int, limit: int, last: dict, strict: bool):
         """``(exit frame, next frame, cost)`` of this run's join, or None."""
         t = self.times
-        first = min(pos + max(t.min_run, self._straight if not self._plan else 0) - 1, limit) if strict else pos
+        straight = self._straight if not self._plan and self._seg[0] == 0 else 0
+        first = min(pos + max(t.min_run, straight) - 1, limit) if strict else pos
         options = []
         lo = max(first, pos)
         exits = np.unique(np.linspace(lo, limit, EXITS).round().astype(int)).tolist() if limit >= lo else []

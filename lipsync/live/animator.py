@@ -188,7 +188,8 @@ class LiveAnimator:
             raise InputError(f"plate_start must be a number of seconds, 0 or more (got {plate_start!r})")
         #: Where on the plate the session starts, seconds.
         self.plate_start = float(plate_start)
-        self._plate_line = None if self.plate is None else self.plate.timeline(self.plate_start)
+        # a live clock may be told any time: a far jump restarts the plate's plan (RESTART_S)
+        self._plate_line = None if self.plate is None else self.plate.timeline(self.plate_start).restarting()
         #: The session's mouth samples (:mod:`lipsync.live.samples`; None: the viseme morph).
         self.samples = self._attach_samples(samples)
         self._phones: List[Tuple[float, float, str]] = []   # the phones pushed (the samples' targets)
