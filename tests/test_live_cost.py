@@ -134,3 +134,66 @@ def test_ordinary_playback_with_restarts_on_is_the_continuous_plan(bank):
     assert [line.frame(k) for k in asked] == plain[asked].tolist()
     assert line._seg[0] == 0 and 3000 <= line.planned < 3000 + len(live.plate)   # (whole runs)
     assert len(set(plain.tolist())) > 0.5 * len(live.plate)     # the plan does move over the plate
+
+
+# --- live audio features keep only the rows the windows read ------------------------------
+
+@pytest.mark.slow
+def test_an_hour_of_running_features_holds_bounded_rows_and_exact_statistics():
+    """An hour of synthetic speech-like audio fed in blocks of about a minute, rows older than
+    the last 4 s forgotten after each block: the stream holds a bounded number of rows (not
+    the hour's 90 000), and the normalised features of its last frames are those of every
+    row the stream produced normalised at once (numpy's two-pass mean and standard deviation
+    over all 90 000 rows) within 1e-9. (4 kHz: an hour's frames at a quarter of 16 kHz's
+    analysis cost; the rows and statistics are per video frame whatever the rate.)"""
+    from lipsync.speech.features import RunningFeatures, normalised
+
+    sr, fps = 4000, 25.0
+    rng = np.random.default_rng(7)
+    run = RunningFeatures(sr, fps)
+    every, held = [], []
+    fed = 0
+    while fed < 3600 * sr:
+        n = min(int(rng.integers(40, 80)) * sr, 3600 * sr - fed)
+        t = np.arange(fed, fed + n) / sr
+        loud = 0.5 + 0.5 * np.sin(2 * np.pi * rng.uniform(0.5, 4.0) * t) ** 2         # syllable-like envelope
+        tone = np.sin(2 * np.pi * rng.uniform(90, 250) * t) * (rng.random(n // 400 + 1).repeat(400)[:n] < 0.6)
+        x = (3000 * loud * (tone + 0.3 * rng.standard_normal(n))).astype(np.int16)
+        before = len(run)
+        run.add(x)
+        every.append(run.rows(before, len(run)).copy())
+        run.forget(len(run) - int(4 * fps))
+        held.append(run.held)
+        fed += n
+    rows = np.concatenate(every)
+    assert len(run) == len(rows) and len(rows) >= 3600 * fps - 1
+    # bounded: the rows of a block and the 4 s kept (the buffer never grew past it)
+    assert max(held) <= 4096 and held[-1] == max(held) and run.first > len(run) - 4096
+    reference = normalised(rows)[-50:]
+    assert np.abs(run.normalised(len(run) - 50, len(run)) - reference).max() < 1e-9
+    assert np.abs(reference).max() > 0.5          # the features do vary
+    with pytest.raises(IndexError):
+        run.rows(0, 10)                            # the first rows were dropped
+
+
+def test_a_session_dropping_old_feature_rows_fixes_the_samples_it_fixed_keeping_them(bank, monkeypatch):
+    """Three sentences fed as one session (7.5 s), feature rows kept only 0.4 s behind what
+    the windows read (at most 2 s in all): the same samples as a session keeping every row,
+    from fewer rows held."""
+    from lipsync.live import samples as LS
+
+    pcm = np.concatenate([load_audio(AUDIO / f"{n}.flac") for n in ("bram2n", "lgwg3s", "lray6p")])[:int(7.5 * RATE)]
+    paths, helds = [], []
+    for behind, keep in ((0.4, 2.0), (1e9, 1e9)):
+        monkeypatch.setattr(LS, "FEATURES_BEHIND_S", behind)
+        monkeypatch.setattr(LS, "FEATURES_KEEP_S", keep)
+        live = LiveAnimator(bank, fps=25, prepare=False, samples="on")
+        for i in range(0, len(pcm), BLOCK):
+            for n in live.feed_audio(pcm[i:i + BLOCK], RATE):
+                live.sample(n)
+        paths.append(list(live.samples.selection.path))
+        f = live.samples.features
+        helds.append((f.first, f.held, len(f)))
+    assert len(paths[0]) >= 180 and paths[0] == paths[1]
+    (first, held, n), (first_all, held_all, _) = helds
+    assert first_all == 0 and held_all >= n and first > 0 and held < held_all
