@@ -4,6 +4,14 @@ round 5's live costs).
 * Each look-ahead window's target takes the samples' per-phone medians from a memo kept per
   samples object (:func:`lipsync.selection.select._groups`): the same medians as computing
   them afresh, so a session fixes the same samples and renders the same pixels.
+* A clock told it is 24 h in restarts the plate's plan near that step
+  (:meth:`lipsync.composite.plate_time.PlateTimeline.restarting`) rather than planning 2.16
+  million steps; ordinary playback is the continuous plan.
+* The running audio features keep exact running statistics and only the rows windows still
+  read (:meth:`lipsync.speech.features.RunningFeatures.forget`): an hour holds a bounded
+  number of rows, and the last frames' features are the whole hour's normalisation.
+* A session mixing audio and pushed phoneme events gives the samples' target the events'
+  phones where they lie (as their visemes win over the audio's), the audio's elsewhere.
 """
 
 from __future__ import annotations
@@ -197,3 +205,57 @@ def test_a_session_dropping_old_feature_rows_fixes_the_samples_it_fixed_keeping_
     assert len(paths[0]) >= 180 and paths[0] == paths[1]
     (first, held, n), (first_all, held_all, _) = helds
     assert first_all == 0 and held_all >= n and first > 0 and held < held_all
+
+
+# --- a session mixing audio and pushed events: the events' phones in the samples' target ---
+
+def _mixed(bank, pcm, push):
+    """Feed 0.5 s, ``push(live)``, feed the rest; record the phones every window saw."""
+    live = LiveAnimator(bank, fps=25, prepare=False, samples="on")
+    seen = []
+    fix = live.samples.fix
+
+    def record(specs_of, phones, kind, stop, key):
+        seen.append(list(phones))
+        return fix(specs_of, phones, kind, stop, key)
+    live.samples.fix = record
+    live.feed_audio(pcm[:RATE // 2], RATE)
+    push(live)
+    for i in range(RATE // 2, len(pcm), BLOCK):
+        for n in live.feed_audio(pcm[i:i + BLOCK], RATE):
+            live.sample(n)
+    for n in live.finish_audio():
+        live.sample(n)
+    return live, seen
+
+
+def _within(phones, a, b):
+    return [p for p in phones if p[1] > a + 1e-9 and p[0] < b - 1e-9]
+
+
+def test_phoneme_events_pushed_into_an_audio_session_are_the_samples_phones_where_they_lie(bank, pcm):
+    events = [(1.0, 1.16, "M"), (1.16, 1.4, "AE1"), (1.4, 1.52, "P")]
+    live, seen = _mixed(bank, pcm, lambda lv: [lv.push(a, b, p, kind="phoneme") for a, b, p in events])
+    heard, heard_seen = _mixed(bank, pcm, lambda lv: None)
+    # every window reaching the events' span saw the events' phones there, and only them
+    reaching = [ph for ph in seen if _within(ph, 1.0, 1.52)]
+    assert len(reaching) >= 10
+    assert all(_within(ph, 1.0, 1.52) == events for ph in reaching if ph[-1][1] >= 1.52)
+    assert any(_within(ph, 1.0, 1.52) != events for ph in heard_seen)      # the audio's phones differ there
+    # outside it, the audio's phones as a session without events hears them
+    assert _within(live._phones, 0.0, 0.9) == _within(heard._phones, 0.0, 0.9)
+    assert _within(live._phones, 1.0, 1.52) == events
+    # the samples fixed in the span follow the events: closed lips on M and P (their visemes
+    # win, as before)
+    from lipsync.selection.select import CLOSED
+
+    s = live.samples.shared.samples
+    path = live.samples.selection.path
+    assert all(s.opening[path[n]] <= CLOSED for n in (26, 27, 36, 37))
+
+
+def test_viseme_events_leave_the_audios_phones_under_them(bank, pcm):
+    live, _ = _mixed(bank, pcm, lambda lv: lv.push(1.0, 1.4, "F", kind="viseme"))
+    heard, _ = _mixed(bank, pcm, lambda lv: None)
+    assert live._phones == heard._phones and _within(live._phones, 1.0, 1.4)
+    assert [live.spec(k).shown for k in range(28, 34)] == ["F"] * 6        # the visemes still win

@@ -115,6 +115,34 @@ def _jump_rows(bank, rows: List[dict]) -> None:
                      "jump_ms": round(1000 * far, 2), "next_frame_ms": round(1000 * near, 3)})
 
 
+def _feature_rows(seconds: float, rows: List[dict]) -> None:
+    """``seconds`` of speech-like audio fed in 20 ms blocks to the session's running
+    features, rows never dropped (before) and dropped as a session drops them (after)."""
+    from ..live import samples as LS
+    from ..live.audio import BLOCK, RATE
+    from ..speech.features import RunningFeatures
+
+    rng = np.random.default_rng(0)
+    t = np.arange(int(seconds * RATE)) / RATE
+    pcm = (3000 * (0.5 + 0.5 * np.sin(2 * np.pi * 3.0 * t) ** 2) * (np.sin(2 * np.pi * 140 * t)
+                                                                   + 0.3 * rng.standard_normal(len(t)))).astype(np.int16)
+    fps = 25.0
+    behind = int(round(LS.FEATURES_BEHIND_S * fps)) + 8    # a window reads from ~CONTEXT_S + context behind the audio
+    for name, drop in (("before: rows kept", False), ("after: rows dropped", True)):
+        run = RunningFeatures(RATE, fps)
+        t0 = time.thread_time()
+        for i in range(0, len(pcm), BLOCK):
+            run.add(pcm[i:i + BLOCK])
+            if drop:
+                run.forget(len(run) - int(round(1.0 * fps)) - behind)
+        cpu = time.thread_time() - t0
+        mb = run._rows.nbytes / 1e6
+        rows.append({"figure": "live_samples_cost", "case": f"audio feature rows, {name}", "audio_s": seconds,
+                     "rows_held": run.held, "rows_mb": round(mb, 2),
+                     "mb_per_hour": round(mb * 3600 / seconds, 1) if not drop else "bounded",
+                     "cpu_ms_per_block": round(1000 * cpu / (len(pcm) // BLOCK), 3)})
+
+
 def live_samples_cost_figures(ctx: Context, rows: List[dict]) -> None:
     import cv2
 
@@ -135,6 +163,7 @@ def live_samples_cost_figures(ctx: Context, rows: List[dict]) -> None:
             _session(bank, np.zeros(16000, np.int16), 25.0, True)   # warm-up: the bank's samples loaded once
             _medians_rows(bank, clips, 1 if ctx.quick else 2, rows)
             _jump_rows(bank, rows)
+            _feature_rows(120.0 if ctx.quick else 600.0, rows)
     finally:
         cv2.setNumThreads(threads)
 
