@@ -9,7 +9,8 @@ Bank: ``visemes/grid-s1``. Audio: the first held-out GRID s1 sentences
   ``time.thread_time``: the audio's processing with the selection, and the render) with
   each look-ahead window's target recomputing the samples' per-phone medians (before:
   :data:`lipsync.selection.select.MEMO_MEDIANS` off) and taking them from the per-bank
-  memo (after); the two are run alternately, and their fixed sample paths must be equal.
+  memo (after), and without samples (the viseme morph, for reference); the two with
+  samples run alternately, and their fixed sample paths must be equal.
 * **far jump**: the plate's plan (:class:`~lipsync.composite.plate_time.PlateTimeline`)
   asked for the frame 24 h in; before, with restarts off, only 10 minutes in (24 h would
   take minutes: the plan grows to every step on the way), after a restart at the jump
@@ -31,9 +32,9 @@ from . import FIGURES, Context
 from . import grid
 
 
-def _session(bank, pcm, fps: float, memo: bool) -> Dict[str, object]:
+def _session(bank, pcm, fps: float, memo: bool, samples: str = "on") -> Dict[str, object]:
     """One audio session: CPU seconds (this thread) of feeding and of rendering, its frames,
-    its selection's seconds and its fixed path."""
+    its selection's seconds and its fixed path (``samples="off"``: the viseme morph, none)."""
     from ..live import LiveAnimator
     from ..live.audio import BLOCK, RATE
     from ..selection import select as S
@@ -41,9 +42,10 @@ def _session(bank, pcm, fps: float, memo: bool) -> Dict[str, object]:
     keep = S.MEMO_MEDIANS
     S.MEMO_MEDIANS = memo
     try:
-        live = LiveAnimator(bank, fps=fps, prepare=False, samples="on")
+        live = LiveAnimator(bank, fps=fps, prepare=False, samples=samples)
         clock = time.thread_time
-        live.samples.selection.clock = clock
+        if live.samples is not None:
+            live.samples.selection.clock = clock
         feed = render = 0.0
         frames = 0
         for i in range(0, len(pcm), BLOCK):
@@ -55,8 +57,9 @@ def _session(bank, pcm, fps: float, memo: bool) -> Dict[str, object]:
                 live.frame(n)
                 render += clock() - t0
                 frames += 1
-        sel = live.samples.selection
-        return {"feed": feed, "render": render, "frames": frames, "select": sel.seconds, "path": list(sel.path)}
+        sel = live.samples.selection if live.samples is not None else None
+        return {"feed": feed, "render": render, "frames": frames, "select": sel.seconds if sel else 0.0,
+                "path": list(sel.path) if sel else []}
     finally:
         S.MEMO_MEDIANS = keep
 
@@ -64,29 +67,32 @@ def _session(bank, pcm, fps: float, memo: bool) -> Dict[str, object]:
 def _medians_rows(bank, clips, repeat: int, rows: List[dict]) -> None:
     from ..speech.audio import load_audio
 
-    got = {False: [], True: []}
+    got = {False: [], True: [], None: []}
     same = True
     for clip in clips:
         pcm = load_audio(str(grid.video(clip)))
         fps = grid.track(clip).fps
         for r in range(repeat):
-            order = (False, True) if r % 2 == 0 else (True, False)   # alternate: neither always runs first
-            runs = {m: _session(bank, pcm, fps, m) for m in order}
+            order = (False, True, None) if r % 2 == 0 else (True, False, None)   # alternate: neither first always
+            runs = {m: _session(bank, pcm, fps, bool(m), "off" if m is None else "on") for m in order}
             same &= runs[False]["path"] == runs[True]["path"]
             for m in order:
                 got[m].append(runs[m])
-    for m, name in ((False, "before: medians recomputed per window"), (True, "after: medians memoised per bank")):
+    for m, name in ((None, "reference: samples off (viseme morph)"), (False, "before: medians recomputed per window"),
+                    (True, "after: medians memoised per bank")):
         frames = sum(c["frames"] for c in got[m])
         rows.append({"figure": "live_samples_cost", "case": name, "frames": frames,
                      "select_ms": round(1000 * sum(c["select"] for c in got[m]) / frames, 2),
                      "audio_ms": round(1000 * sum(c["feed"] for c in got[m]) / frames, 2),
                      "render_ms": round(1000 * sum(c["render"] for c in got[m]) / frames, 2),
                      "total_ms": round(1000 * sum(c["feed"] + c["render"] for c in got[m]) / frames, 2)})
-    before, after = rows[-2], rows[-1]
+    off, before, after = rows[-3], rows[-2], rows[-1]
     rows.append({"figure": "live_samples_cost", "case": "ratio after / before",
                  "select_ms": round(after["select_ms"] / before["select_ms"], 2),
                  "total_ms": round(after["total_ms"] / before["total_ms"], 2),
                  "same_paths": bool(same)})
+    rows.append({"figure": "live_samples_cost", "case": "samples on over off, before -> after",
+                 "total_ms": f"{before['total_ms'] / off['total_ms']:.2f} -> {after['total_ms'] / off['total_ms']:.2f}"})
 
 
 def _jump_rows(bank, rows: List[dict]) -> None:
