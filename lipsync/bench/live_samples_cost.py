@@ -91,8 +91,9 @@ def _medians_rows(bank, clips, repeat: int, rows: List[dict]) -> None:
                  "select_ms": round(after["select_ms"] / before["select_ms"], 2),
                  "total_ms": round(after["total_ms"] / before["total_ms"], 2),
                  "same_paths": bool(same)})
+    on_off = (before["total_ms"] / off["total_ms"], after["total_ms"] / off["total_ms"])
     rows.append({"figure": "live_samples_cost", "case": "samples on over off, before -> after",
-                 "total_ms": f"{before['total_ms'] / off['total_ms']:.2f} -> {after['total_ms'] / off['total_ms']:.2f}"})
+                 "total_ms": f"{on_off[0]:.2f} -> {on_off[1]:.2f}"})
 
 
 def _jump_rows(bank, rows: List[dict]) -> None:
