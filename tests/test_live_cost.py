@@ -144,6 +144,27 @@ def test_ordinary_playback_with_restarts_on_is_the_continuous_plan(bank):
     assert len(set(plain.tolist())) > 0.5 * len(live.plate)     # the plan does move over the plate
 
 
+def test_a_long_live_plan_keeps_its_last_steps_and_plays_as_the_continuous_one(bank, monkeypatch):
+    """A live plan drops the plate frames of old steps (KEEP_S, here 10 s): played step by
+    step for 10 000 steps it shows the continuous plan's frames, holding at most 2 KEEP_S
+    and a run of them; a step older than those kept is a far jump back (a restart)."""
+    import lipsync.composite.plate_time as P
+
+    monkeypatch.setattr(P, "KEEP_S", 10.0)
+    times = LiveAnimator(bank, fps=25, prepare=False, samples="off").plate.times
+    plain = P.PlateTimeline(times, start=0.61).frames(10000)
+    line = P.PlateTimeline(times, start=0.61).restarting()
+    held = []
+    for k in range(10000):
+        assert line.frame(k) == plain[k], k
+        held.append(line.planned)
+    keep = int(10.0 * times.fps)
+    assert max(held) <= 2 * keep + times.n + 1 and line._seg[0] > 10000 - 2 * keep - times.n
+    assert 0 < len(line.joins) <= line.planned // times.min_run + 1 and line.joins[0][0] > line._seg[0]
+    line.frame(100)                               # long dropped: planned afresh from its grid step
+    assert line._seg[0] == 100 - 100 % int(P.RESTART_S * times.fps)
+
+
 # --- live audio features keep only the rows the windows read ------------------------------
 
 @pytest.mark.slow

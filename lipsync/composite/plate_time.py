@@ -105,6 +105,10 @@ _BLOCK = 1024
 #: begin on a grid of this many seconds (a frame costs at most so many steps of planning,
 #: ~50 ms), so the same far frame asked twice is the same plate frame.
 RESTART_S = 10.0
+#: A live plan (:meth:`PlateTimeline.restarting`) keeps the plate frames of at least its last
+#: this many seconds of steps and drops older ones (a day's session held 2.16 million; the
+#: planning reads only the last REPEAT_GAP_S): a step older than those kept is a far jump back.
+KEEP_S = 60.0
 
 
 def blink_runs(eyes: np.ndarray, *, below: float = BLINK_BELOW) -> List[Tuple[int, int]]:
@@ -281,8 +285,9 @@ class PlateTimeline:
         self._lock = threading.Lock()
         #: Steps past the plan's end (or before its start) that restart it; None: never.
         self._far: Optional[int] = None
+        self._keep: Optional[int] = None   # steps of the plan kept (restarting: KEEP_S)
         #: ``(step, from_frame, to_frame, cost)`` of every join made so far (of the plan since
-        #: its last restart).
+        #: its last restart; a live plan's: of the steps it keeps).
         self.joins: List[Tuple[int, int, int, float]] = []
         self._begin(0)
 
@@ -300,6 +305,7 @@ class PlateTimeline:
         # (offset, plan): the plan's first step and its plate frames, swapped as one
         self._seg: Tuple[int, List[int]] = (int(step), [])
         self._plan = self._seg[1]
+        self._origin = int(step)   # where this plan began (steps are counted from the clip's 0)
         self._state = _State(pos=pos, last={})
         self._rng = np.random.default_rng(int(pos) * 7919 + int(seed * 2 ** 31))
         self.joins = []
@@ -320,6 +326,7 @@ class PlateTimeline:
         (True, True)
         """
         self._far = max(1, int(round(RESTART_S * self.times.fps)))
+        self._keep = max(self._far, self.times.repeat, int(round(KEEP_S * self.times.fps)))
         return self
 
     @property
@@ -338,12 +345,15 @@ class PlateTimeline:
             if self._far is not None and (k < first or k >= first + len(plan) + self._far):
                 self._begin(k - k % self._far)
                 first, plan = self._seg
-            while first + len(plan) <= k:
-                self._extend()
+            while self._seg[0] + len(self._seg[1]) <= k:
+                self._extend()   # (may drop old steps: the plan is read anew)
+            first, plan = self._seg
             return plan[k - first]
 
     def frames(self, count: int) -> np.ndarray:
         """:meth:`frame` of steps ``0 .. count-1``, planned straight on from step 0."""
+        if self._keep is not None:   # a live plan keeps only its last steps: ask them in order
+            return np.array([self.frame(k) for k in range(count)], np.int64)
         with self._lock:
             if self._seg[0] != 0:
                 self._begin(0)
@@ -374,7 +384,9 @@ class PlateTimeline:
 
     def _extend(self) -> None:
         t, st = self.times, self._state
-        at = len(self._plan)
+        at = self._seg[0] + len(self._plan)   # the output step the run starts at
+        if self._keep is not None and len(self._plan) > 2 * self._keep:
+            self._drop_old()
         if t.n <= 1:
             self._plan.append(0)
             return
@@ -391,6 +403,15 @@ class PlateTimeline:
         self.joins.append((self._seg[0] + len(self._plan), e, j, c))
         st.pos = j
 
+    def _drop_old(self) -> None:
+        """A live plan: drop the plate frames of steps older than the last ``_keep`` (the
+        planning reads only the last REPEAT_GAP_S; every step count is from the clip's 0)."""
+        first, plan = self._seg
+        drop = len(plan) - self._keep
+        kept = plan[drop:]
+        self._seg = (first + drop, kept)   # one swap: a reader sees the old plan or the new
+        self._plan = kept
+        self.joins = [x for x in self.joins if x[0] > first + drop]   # the joins of the steps kept
     def _blink_due(self, pos: int, at: int, options, last: dict) -> np.ndarray:
         """Per option, the bonus (median steps) for landing just before a blink that may be
         shown again, once none has been shown for BLINK_DUE_S: it grows to BLINK_DUE_BONUS
@@ -399,7 +420,7 @@ class PlateTimeline:
         t = self.times
         if not t.spans:
             return np.zeros(len(options))
-        since = (at - max(last.values())) if last else at
+        since = (at - max(last.values())) if last else at - self._origin
         due = int(round(BLINK_DUE_S * t.fps))
         if since <= due:
             return np.zeros(len(options))
@@ -415,13 +436,13 @@ class PlateTimeline:
         """Per plate frame, the output step it was last shown at (far past: never)."""
         shown = np.full(self.times.n, -10 ** 9, np.int64)
         recent = self._plan[-self.times.repeat:] if self.times.repeat else []
-        shown[np.asarray(recent, np.int64)] = np.arange(len(self._plan) - len(recent), len(self._plan))
+        shown[np.asarray(recent, np.int64)] = np.arange(at - len(recent), at)
         return shown
 
     def _choose(self, pos: int, at: int, limit: int, last: dict, strict: bool):
         """``(exit frame, next frame, cost)`` of this run's join, or None."""
         t = self.times
-        straight = self._straight if not self._plan and self._seg[0] == 0 else 0
+        straight = self._straight if at == 0 else 0
         first = min(pos + max(t.min_run, straight) - 1, limit) if strict else pos
         options = []
         lo = max(first, pos)
@@ -436,7 +457,7 @@ class PlateTimeline:
         if not options:
             return None
         costs = np.array([o[2] for o in options])
-        if self._plan:
+        if at > self._origin:
             shown = self._last_shown(at)
             lands = np.array([o[1] for o in options])
             costs = costs + LOOP_PENALTY * np.clip(1.0 - (at - shown[lands]) / max(t.repeat, 1), 0.0, 1.0)
