@@ -54,7 +54,7 @@ from typing import List, Optional, Tuple
 import numpy as np
 
 __all__ = ["PlateTimes", "PlateTimeline", "default_start", "blink_runs", "upper_face_features",
-           "BLINK_BELOW", "REPEAT_GAP_S", "RESTART_S"]
+           "BLINK_BELOW", "REPEAT_GAP_S", "RESTART_S", "KEEP_S"]
 
 #: Eye opening below this share of the plate's median is a blink (or the lids lowered to
 #: read: as visible, and as bad to repeat). The face mesh never lets the lids meet: GRID
