@@ -14,10 +14,11 @@ edge), the **face above the nose moves as the speaker's does** (not stiller: wit
 :data:`NATURAL_BAND` of the footage's mean, :func:`upper_motion`), the **head moves least** (the still points' centre, frame to frame, and how far it
 wanders over the window) and turns least (the stabilisation residual), with the face found
 in every frame; shorter windows (down to 1.5 s) when no 4 s one keeps the head still.
-The frames are cut at the bank's framing by **one** transform, the stretch's mean pose
-(stabilised: the crop does not jitter with the tracker, while the head keeps its own
-motion inside it), and each frame's own pose is stored as the 2x3 matrix taking bank
-pixels to that plate frame's pixels.
+The frames are cut by **one** transform for the whole stretch (stabilised: the crop does
+not jitter with the tracker, while the head keeps its own motion inside it): the footage's
+own pixels, a whole-pixel window about where the stretch's mean pose puts the bank's
+picture (:func:`plate_cut`; a bank of another size is resampled at the mean pose), and each
+frame's own pose is stored as the 2x3 matrix taking bank pixels to that plate frame's pixels.
 
 Written into the bank (bank.yaml ``plate: {video: plate.mp4, poses: plate.json, mask:
 plate-mask.png}``):
