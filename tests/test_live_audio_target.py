@@ -56,7 +56,7 @@ def test_running_features_are_the_offline_features_and_statistics_of_what_was_he
         ideal = max(0, (at - 40) // 640)
         assert min(50, ideal - 1) <= k <= min(50, ideal)
         if k:
-            assert np.allclose(run._rows[:k], offline[:k], atol=1e-9)
+            assert np.allclose(run.rows(0, k), offline[:k], atol=1e-9)
             assert np.allclose(run.normalised(0, k), normalised(offline[:k]), atol=1e-9)
     run.finish(50)
     assert len(run) == 50

@@ -135,7 +135,8 @@ def _renders(bank, clip: Path, tmp: Path, mesh, closures, sheets: Optional[Path]
     from lipsync.face.video import probe_video
 
     fps = probe_video(clip).fps
-    ref = _measures(_encoded(_decoded(clip), tmp, fps), fps, mesh)
+    source = _decoded(clip)
+    ref = _measures(_encoded(source, tmp, fps), fps, mesh)
     phones, base = _timeline(bank, fps)
     rows, shown = {}, {}
     for m in METHODS:
@@ -147,9 +148,49 @@ def _renders(bank, clip: Path, tmp: Path, mesh, closures, sheets: Optional[Path]
         got = _measures(_encoded(frames, tmp, fps), fps, mesh, anim.specs, closures, joins)
         rows[f"render: {m}"] = _row(got, ref, _measures(frames, fps, mesh))
         shown[m] = (frames, joins)
+        if m == METHODS[0]:
+            rows[f"stages: {m}"] = _stages(anim, source, fps, mesh, ref)
     if sheets is not None:
         _join_sheets(shown, mesh, fps, sheets)
     return rows, ref
+
+
+def _stages(anim, source, fps: float, mesh, ref: dict) -> dict:
+    """What happens to the render's mouth between the source frame and the output, stage by
+    stage (issue 35: count every resample): the samples' crops as stored (samples.mp4)
+    against the same crops cut from the decoded clip (Laplacian variance, median ratio);
+    the plate under the render (its lips' sharpness over the clip's, re-encoded as the
+    product does: the same reference as the rows), and whether it was cut whole-pixel; the
+    frames whose mouth is a sample pasted whole-pixel (no resample), pasted through a
+    resample, or morphed across a join (two resamples and a blend)."""
+    from lipsync.composite.plate import compose
+    from lipsync.composite.samples import whole_shift
+    from lipsync.samples.build import _cut
+    from lipsync.videobank.select import sharpness
+
+    sp, plate = anim.sample_path, anim.plate
+    s = sp.samples
+    h, w = s.crops.shape[1:3]
+    ratios = [sharpness(s.crops[k], (0, 0, w, h)) / max(sharpness(np.ascontiguousarray(
+        _cut(source[int(s.frame[k])], tuple(int(x) for x in s.origin[k]), (w, h))), (0, 0, w, h)), 1e-9)
+        for k in range(len(s.crops)) if int(s.clip[k]) == 0 and int(s.frame[k]) < len(source)]
+    kinds = {"whole-pixel": 0, "resampled": 0, "morphed": 0}
+    for i in range(len(sp)):
+        a, b, alpha = int(sp.src[i]), int(sp.dst[i]), float(sp.alpha[i])
+        if alpha < 1.0 and a != b:
+            kinds["morphed"] += 1
+            continue
+        pose = plate.poses[plate.index(i, fps, anim.plate_line)]
+        kinds["whole-pixel" if whole_shift(compose(pose, s.affine[b]), (h, w)) is not None else "resampled"] += 1
+    pm = _measures(list(plate.frames), plate.fps, mesh)
+    import json
+
+    cut = json.loads(anim.bank.plate.poses.read_text())["source"].get("cut")
+    return {"crops as stored": round(float(np.median(ratios)), 3) if ratios else None,
+            "plate lips' sharpness": round(float(np.nanmedian(pm["lips"]) / np.nanmedian(ref["lips"])), 3),
+            "plate cut": "none" if cut is None else ("whole-pixel" if cut[:2] == [1.0, 0.0] and cut[3:5] == [0.0, 1.0]
+                                                      and float(cut[2]).is_integer() else "resampled"),
+            **{f"frames {k}": round(v / max(len(sp), 1), 3) for k, v in kinds.items()}}
 
 
 def _dubs(bank_dir: Path, clip: Path, tmp: Path, mesh, closures, ref: dict) -> Dict[str, dict]:

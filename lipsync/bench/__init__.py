@@ -33,7 +33,7 @@ FIGURES: "Registry[Callable[[Context, List[dict]], None]]" = Registry("benchmark
 # Figure modules, run in this order; a module not written yet is skipped.
 _FIGURE_MODULES = ["render", "align", "live", "batch", "editor", "face", "videobank", "alpha", "coarticulation", "ceiling",
                    "atlas", "inbetween", "languages", "dub", "timing_editor", "sequencer", "translation",
-                   "plate_time", "samples", "live_samples"]
+                   "plate_time", "samples", "live_samples", "live_samples_cost"]
 
 
 @dataclass(frozen=True)

@@ -54,7 +54,7 @@ from typing import List, Optional, Tuple
 import numpy as np
 
 __all__ = ["PlateTimes", "PlateTimeline", "default_start", "blink_runs", "upper_face_features",
-           "BLINK_BELOW", "REPEAT_GAP_S"]
+           "BLINK_BELOW", "REPEAT_GAP_S", "RESTART_S", "KEEP_S"]
 
 #: Eye opening below this share of the plate's median is a blink (or the lids lowered to
 #: read: as visible, and as bad to repeat). The face mesh never lets the lids meet: GRID
@@ -98,6 +98,17 @@ EXITS, JOINS_PER_EXIT = 100, 64
 #: other's nearest: a short list would never leave it).
 NEIGHBOURS = 1500
 _BLOCK = 1024
+#: A live session's plan (:meth:`PlateTimeline.restarting`) asked for a step this many
+#: seconds past its end, or before its start, restarts there rather than planning every
+#: step on the way: planning runs at ~0.2 ms a step, so a clock told it is 24 h in took
+#: minutes, and a viewer who was away that long saw none of the frames between. Restarts
+#: begin on a grid of this many seconds (a frame costs at most so many steps of planning,
+#: ~50 ms), so the same far frame asked twice is the same plate frame.
+RESTART_S = 10.0
+#: A live plan (:meth:`PlateTimeline.restarting`) keeps the plate frames of at least its last
+#: this many seconds of steps and drops older ones (a day's session held 2.16 million; the
+#: planning reads only the last REPEAT_GAP_S): a step older than those kept is a far jump back.
+KEEP_S = 60.0
 
 
 def blink_runs(eyes: np.ndarray, *, below: float = BLINK_BELOW) -> List[Tuple[int, int]]:
@@ -268,28 +279,87 @@ class PlateTimeline:
         pos = int(np.floor((float(start) % 1.0) * n)) if n else 0
         if n and times.blink_of[pos] >= 0:
             pos = times.spans[times.blink_of[pos]][0]  # never start in the middle of a blink
-        self._plan: List[int] = []
-        self._state = _State(pos=pos, last={})
+        self._start = float(start)
+        self._first_pos = pos
         self._straight = int(straight)
-        self._rng = np.random.default_rng(int(pos) * 7919 + int(default_start(start) * 2 ** 31))
         self._lock = threading.Lock()
-        #: ``(step, from_frame, to_frame, cost)`` of every join made so far.
+        #: Steps past the plan's end (or before its start) that restart it; None: never.
+        self._far: Optional[int] = None
+        self._keep: Optional[int] = None   # steps of the plan kept (restarting: KEEP_S)
+        #: ``(step, from_frame, to_frame, cost)`` of every join made so far (of the plan since
+        #: its last restart; a live plan's: of the steps it keeps).
         self.joins: List[Tuple[int, int, int, float]] = []
+        self._begin(0)
+
+    def _begin(self, step: int) -> None:
+        """Plan afresh from output step ``step``: step 0 from the clip's start; a restart's
+        step from a place on the plate drawn from the clip's start and the step."""
+        t = self.times
+        if step == 0:
+            pos, seed = self._first_pos, default_start(self._start)
+        else:
+            seed = default_start(self._start, step)
+            pos = int(np.floor(seed * t.n)) if t.n else 0
+            if t.n and t.blink_of[pos] >= 0:
+                pos = t.spans[t.blink_of[pos]][0]
+        # (offset, plan): the plan's first step and its plate frames, swapped as one
+        self._seg: Tuple[int, List[int]] = (int(step), [])
+        self._plan = self._seg[1]
+        self._origin = int(step)   # where this plan began (steps are counted from the clip's 0)
+        self._state = _State(pos=pos, last={})
+        self._rng = np.random.default_rng(int(pos) * 7919 + int(seed * 2 ** 31))
+        self.joins = []
+
+    def restarting(self) -> "PlateTimeline":
+        """This timeline, restarting its plan at a far jump of the clock (:data:`RESTART_S`):
+        a live session's, whose clock may be told any time. Ordinary playback (each step
+        asked after the one before, or within RESTART_S of the plan's end) plays exactly as
+        without; an offline render never restarts (its frames never depend on the order
+        they are asked in).
+
+        Examples
+        --------
+        >>> times = PlateTimes(np.sin(np.arange(50)[:, None] * [[0.3, 0.7]]), np.ones(50), fps=25.0)
+        >>> line = PlateTimeline(times, start=0.5).restarting()
+        >>> j = line.frame(25 * 86400)               # a day in: planned from a restart near it
+        >>> line.planned <= int(RESTART_S * 25), 0 <= j < 50
+        (True, True)
+        """
+        self._far = max(1, int(round(RESTART_S * self.times.fps)))
+        self._keep = max(self._far, self.times.repeat, int(round(KEEP_S * self.times.fps)))
+        return self
+
+    @property
+    def planned(self) -> int:
+        """Steps planned since the last (re)start: the plan's state."""
+        return len(self._seg[1])
 
     def frame(self, k: int) -> int:
         """The plate frame shown at step ``k`` of the plate's clock."""
-        if k < len(self._plan):
-            return self._plan[k]
+        k = max(int(k), 0)
+        first, plan = self._seg
+        if first <= k < first + len(plan):
+            return plan[k - first]
         with self._lock:
-            while len(self._plan) <= k:
-                self._extend()
-        return self._plan[k]
+            first, plan = self._seg
+            if self._far is not None and (k < first or k >= first + len(plan) + self._far):
+                self._begin(k - k % self._far)
+                first, plan = self._seg
+            while self._seg[0] + len(self._seg[1]) <= k:
+                self._extend()   # (may drop old steps: the plan is read anew)
+            first, plan = self._seg
+            return plan[k - first]
 
     def frames(self, count: int) -> np.ndarray:
-        """:meth:`frame` of steps ``0 .. count-1``."""
-        if count:
-            self.frame(count - 1)
-        return np.asarray(self._plan[:count], np.int64)
+        """:meth:`frame` of steps ``0 .. count-1``, planned straight on from step 0."""
+        if self._keep is not None:   # a live plan keeps only its last steps: ask them in order
+            return np.array([self.frame(k) for k in range(count)], np.int64)
+        with self._lock:
+            if self._seg[0] != 0:
+                self._begin(0)
+            while len(self._plan) < count:
+                self._extend()
+            return np.asarray(self._plan[:count], np.int64)
 
     # ------------------------------------------------------------------ planning
 
@@ -314,7 +384,9 @@ class PlateTimeline:
 
     def _extend(self) -> None:
         t, st = self.times, self._state
-        at = len(self._plan)
+        at = self._seg[0] + len(self._plan)   # the output step the run starts at
+        if self._keep is not None and len(self._plan) > 2 * self._keep:
+            self._drop_old()
         if t.n <= 1:
             self._plan.append(0)
             return
@@ -328,9 +400,18 @@ class PlateTimeline:
             e, j, c = best
         self._plan.extend(range(st.pos, e + 1))
         st.last = self._blinks_in(st.pos, e, at, st.last)
-        self.joins.append((len(self._plan), e, j, c))
+        self.joins.append((self._seg[0] + len(self._plan), e, j, c))
         st.pos = j
 
+    def _drop_old(self) -> None:
+        """A live plan: drop the plate frames of steps older than the last ``_keep`` (the
+        planning reads only the last REPEAT_GAP_S; every step count is from the clip's 0)."""
+        first, plan = self._seg
+        drop = len(plan) - self._keep
+        kept = plan[drop:]
+        self._seg = (first + drop, kept)   # one swap: a reader sees the old plan or the new
+        self._plan = kept
+        self.joins = [x for x in self.joins if x[0] > first + drop]   # the joins of the steps kept
     def _blink_due(self, pos: int, at: int, options, last: dict) -> np.ndarray:
         """Per option, the bonus (median steps) for landing just before a blink that may be
         shown again, once none has been shown for BLINK_DUE_S: it grows to BLINK_DUE_BONUS
@@ -339,7 +420,7 @@ class PlateTimeline:
         t = self.times
         if not t.spans:
             return np.zeros(len(options))
-        since = (at - max(last.values())) if last else at
+        since = (at - max(last.values())) if last else at - self._origin
         due = int(round(BLINK_DUE_S * t.fps))
         if since <= due:
             return np.zeros(len(options))
@@ -355,13 +436,14 @@ class PlateTimeline:
         """Per plate frame, the output step it was last shown at (far past: never)."""
         shown = np.full(self.times.n, -10 ** 9, np.int64)
         recent = self._plan[-self.times.repeat:] if self.times.repeat else []
-        shown[np.asarray(recent, np.int64)] = np.arange(len(self._plan) - len(recent), len(self._plan))
+        shown[np.asarray(recent, np.int64)] = np.arange(at - len(recent), at)
         return shown
 
     def _choose(self, pos: int, at: int, limit: int, last: dict, strict: bool):
         """``(exit frame, next frame, cost)`` of this run's join, or None."""
         t = self.times
-        first = min(pos + max(t.min_run, self._straight if not self._plan else 0) - 1, limit) if strict else pos
+        straight = self._straight if at == 0 else 0
+        first = min(pos + max(t.min_run, straight) - 1, limit) if strict else pos
         options = []
         lo = max(first, pos)
         exits = np.unique(np.linspace(lo, limit, EXITS).round().astype(int)).tolist() if limit >= lo else []
@@ -375,7 +457,7 @@ class PlateTimeline:
         if not options:
             return None
         costs = np.array([o[2] for o in options])
-        if self._plan:
+        if at > self._origin:
             shown = self._last_shown(at)
             lands = np.array([o[1] for o in options])
             costs = costs + LOOP_PENALTY * np.clip(1.0 - (at - shown[lands]) / max(t.repeat, 1), 0.0, 1.0)

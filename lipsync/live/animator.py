@@ -188,7 +188,8 @@ class LiveAnimator:
             raise InputError(f"plate_start must be a number of seconds, 0 or more (got {plate_start!r})")
         #: Where on the plate the session starts, seconds.
         self.plate_start = float(plate_start)
-        self._plate_line = None if self.plate is None else self.plate.timeline(self.plate_start)
+        # a live clock may be told any time: a far jump restarts the plate's plan (RESTART_S)
+        self._plate_line = None if self.plate is None else self.plate.timeline(self.plate_start).restarting()
         #: The session's mouth samples (:mod:`lipsync.live.samples`; None: the viseme morph).
         self.samples = self._attach_samples(samples)
         self._phones: List[Tuple[float, float, str]] = []   # the phones pushed (the samples' targets)
@@ -216,6 +217,7 @@ class LiveAnimator:
         self._shapes: List[str] = []        # ... and the shape (cue) each shows
         self._committed_f = 0           # audio: 10 ms frames whose phones are pushed
         self._events: List[Tuple[float, float, str]] = []   # mixed: events not yet pushed
+        self._event_phones: List[Tuple[float, float, str]] = []   # mixed: their phones (the samples' targets)
         self._tail: Optional[List[Tuple[float, float, str]]] = None   # provisional segments
         self._finished = False          # audio: finish_audio was called
         self._closed = False            # audio: close was called (the recogniser freed)
@@ -258,6 +260,7 @@ class LiveAnimator:
             self._version += 1
             if self._fe is not None:
                 self._hold_events(segs)
+                self._hold_event_phones(phones, phone_kind)
                 return
             try:
                 self._seq.extend(segs)
@@ -451,7 +454,8 @@ class LiveAnimator:
         into visemes, the sequencer (the animator's timing) into frames. The frame of time
         ``t`` is fixed as soon as the audio reaches ``t + audio_lookahead`` (a player shows
         it with the sound delayed by that much: :attr:`delay`), from everything heard by
-        then. Events pushed in the same session win over the audio where both exist.
+        then. Events pushed in the same session win over the audio where both exist (their
+        phones too, in a samples bank's target).
 
         Invariance: the audio is processed in 20 ms blocks of 16 kHz samples whatever the
         chunks, so the frames depend only on the samples fed, never on how they were cut
@@ -619,10 +623,10 @@ class LiveAnimator:
         if flush:
             keep, new_f = runs, max(fe.frames, self._committed_f)
         segs = self._phone_segments(keep, self._committed_f)
-        self._add_phones([(a * FRAME_S, b * FRAME_S, p) for a, b, p in keep], PHONEME)   # the samples' targets
         cut = new_f * FRAME_S
         if flush and self._events:
             cut = max(cut, self._events[-1][1])
+        self._commit_phones([(a * FRAME_S, b * FRAME_S, p) for a, b, p in keep], cut, flush)
         mixed = _overlay(segs, self._events)
         push = [s for s in mixed if s[1] <= cut + 1e-9]
         self._events = [e for e in self._events if e[1] > cut + 1e-9]
@@ -632,6 +636,27 @@ class LiveAnimator:
             raise TimelineError(str(exc)) from None
         self._committed_f = new_f
         fe.forget(new_f)
+
+    def _commit_phones(self, heard, cut: float, flush: bool) -> None:
+        """The samples' targets: the audio's phones ``heard``, pushed events' phones where
+        they lie (as their visemes win over the audio's), up to ``cut``."""
+        if flush and self._event_phones:
+            cut = max(cut, self._event_phones[-1][1])
+        said = _overlay(heard, self._event_phones)
+        self._add_phones([p for p in said if p[1] <= cut + 1e-9], PHONEME)
+        self._event_phones = [e for e in self._event_phones if e[1] > cut + 1e-9]
+
+    def _hold_event_phones(self, phones, kind: str) -> None:
+        """Mixed session: the phones of events pushed (phonemes, or words' phonemes) are the
+        samples' targets where they lie, the audio's phones elsewhere: an app pushing its
+        own timing (a TTS engine's phonemes) says which sound is made when, exactly, where
+        the phone loop guesses; the audio's lip prediction (what is heard) still blends in.
+        Viseme events carry no phones: the audio's stay under them (the events' visemes
+        still set the frames' visemes and closures)."""
+        if self.samples is None or kind != PHONEME or not phones:
+            return
+        h = self._seq.horizon   # as _hold_events: time already pushed is too late for them
+        self._event_phones.extend((max(float(a), h), float(b), lab) for a, b, lab in phones if b > h)
 
     def _provisional(self, n: int) -> FrameSpec:
         return self._seq.spec_with(n, self._tail_segments())
@@ -662,7 +687,7 @@ class LiveAnimator:
         from .audio import FRAME_S
 
         runs = self._fe.phones(self._committed_f)
-        return [(a * FRAME_S, b * FRAME_S, p) for a, b, p in runs]
+        return _overlay([(a * FRAME_S, b * FRAME_S, p) for a, b, p in runs], self._event_phones)
 
     def _attach_samples(self, option):
         """The session's :class:`~lipsync.live.samples.LiveSamples` when the bank has samples,

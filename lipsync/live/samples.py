@@ -55,6 +55,15 @@ CONTEXT_S = 1.0
 #: / 0.5 / 0.6 / 0.7 / 1. More than offline's 0.3: the live phones come from the phone loop
 #: (no transcript) and err more, the sound's prediction does not depend on them.
 LIVE_AUDIO_SHARE = 0.6
+#: Audio feature rows kept behind the earliest row a window read (seconds): a later window
+#: reaches back at most a recogniser's revision further (its phones are fixed COMMIT_AFTER_S,
+#: 0.6 s, behind the frame, and a window's context is CONTEXT_S before its first phone), so
+#: 5 s is thrice that; older rows are dropped (the running statistics keep them).
+FEATURES_BEHIND_S = 5.0
+#: At most this many seconds of feature rows are kept whatever the windows read (a phone
+#: the recogniser held for minutes): memory stays bounded, ~0.3 MB at 25 fps; a window
+#: reaching before the rows kept reads the first kept one for the frames before it.
+FEATURES_KEEP_S = 60.0
 #: Banks' samples kept decoded in this process for live sessions (each is the bank's crops,
 #: ~20 MB for grid-s1's).
 KEEP_BANKS = 2
@@ -161,11 +170,12 @@ class LiveSamples:
         if f is None or len(f) == 0 or b <= a:
             return None
         ctx = self.model.context
-        lo, hi = max(0, a - ctx), min(len(f), b + ctx)
+        lo, hi = max(f.first, a - ctx), min(len(f), b + ctx)
         if lo >= hi:
             lo = hi - 1
         rows = f.normalised(lo, hi)
         at = np.clip(np.arange(a, b)[:, None] + np.arange(-ctx, ctx + 1)[None, :], lo, hi - 1) - lo
+        f.forget(max(lo - int(round(FEATURES_BEHIND_S * self.fps)), len(f) - int(round(FEATURES_KEEP_S * self.fps))))
         return rows[at].reshape(b - a, -1) @ self.model.weights + self.model.bias
 
     def __len__(self) -> int:

@@ -34,7 +34,9 @@ Examples
 
 from __future__ import annotations
 
+import threading
 import time
+import weakref
 from dataclasses import dataclass
 from typing import Hashable, List, Optional, Sequence, Tuple
 
@@ -84,6 +86,27 @@ class _Memo:
         return getattr(self._obj, name)
 
 
+_PROXIES: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
+_PROXIES_LOCK = threading.Lock()
+
+
+def _proxies(selector):
+    """The selector's samples and map seen through :class:`_Memo`, one pair per selector
+    (per bank and map: every stream of the bank shares it, and with it the samples' medians
+    that :func:`~lipsync.selection.select.phone_schedule` remembers per samples object)."""
+    def made():
+        return _Memo(selector.samples, attributes=("labels",)), _Memo(selector.pmap, methods=("targets",))
+
+    try:
+        with _PROXIES_LOCK:
+            got = _PROXIES.get(selector)
+            if got is None:
+                got = _PROXIES[selector] = made()
+            return got
+    except TypeError:   # a selector that takes no weak reference: the stream's own
+        return made()
+
+
 class Incremental:
     """The selection of one live stream, fixed frame by frame (see the module docstring).
 
@@ -121,8 +144,7 @@ class Incremental:
         self.seconds = 0.0
         self.window_frames = 0
         # the same values as the selector's, looked up once (each window's target reads them)
-        self._samples = _Memo(selector.samples, attributes=("labels",))
-        self._pmap = _Memo(selector.pmap, methods=("targets",))
+        self._samples, self._pmap = _proxies(selector)
 
     def __len__(self) -> int:
         """The next frame to fix (every frame before it from :attr:`first` on is fixed)."""

@@ -24,7 +24,9 @@ True
 
 from __future__ import annotations
 
+import threading
 import time
+import weakref
 from dataclasses import dataclass, field
 from typing import Dict, List, Optional, Sequence
 
@@ -306,11 +308,85 @@ def _medians(samples, keys: np.ndarray, wanted, closed_keys) -> Dict[str, tuple]
     return out
 
 
+#: Whether :func:`phone_schedule` takes its medians from the samples' memo (:func:`_groups`);
+#: False computes them afresh at every call (the benchmark's "before", the tests' reference).
+MEMO_MEDIANS = True
+
+
+class _Groups:
+    """One samples table's (opening, width) medians per group of its phones, each computed
+    once: a live session makes a target for every look-ahead window from the same samples,
+    and recomputing the medians was most of a window's cost (5.6 ms of its 14.5 ms a frame).
+    A group is a set of phone labels (one phone, or the phones of a viseme), all its samples
+    or only the closed ones; the value is :func:`_medians`' for the same samples.
+
+    Examples
+    --------
+    >>> from types import SimpleNamespace
+    >>> s = SimpleNamespace(labels=np.array(["a", "b", "a", "c"]), opening=np.array([0.0, 0.25, 0.5, 0.75]),
+    ...                     width=np.array([1.0, 2.0, 3.0, 4.0]))
+    >>> g = _Groups(s)
+    >>> g.medians(("a",), False), g.medians(("a",), True), g.medians(("a", "b"), False), g.medians(("z",), False)
+    ((0.25, 2.0), (0.0, 1.0), (0.25, 2.0), (0.375, 2.5))
+    """
+
+    def __init__(self, samples):
+        self.names, self.inverse = np.unique(np.asarray(samples.labels), return_inverse=True)
+        self.inverse = self.inverse.reshape(-1)
+        self.index = {str(x): k for k, x in enumerate(self.names.tolist())}
+        self.opening, self.width = samples.opening, samples.width
+        self._done: Dict[tuple, tuple] = {}
+
+    def medians(self, labels: tuple, closed: bool) -> tuple:
+        """``(median opening, median width)`` of the samples of ``labels`` (only those with
+        closed lips when ``closed``), every sample's where there are none."""
+        key = (labels, bool(closed))
+        got = self._done.get(key)
+        if got is None:
+            codes = [self.index[x] for x in labels if x in self.index]
+            mine = np.isin(self.inverse, codes)
+            if closed:
+                mine &= self.opening <= CLOSED
+            pick = mine if mine.any() else slice(None)
+            got = self._done[key] = (float(np.median(self.opening[pick])), float(np.median(self.width[pick])))
+        return got
+
+
+#: id(samples) -> (weak reference to it, the arrays read, its _Groups): see :func:`_groups`.
+_GROUPS: Dict[int, tuple] = {}
+_GROUPS_LOCK = threading.Lock()
+
+
+def _groups(samples) -> "_Groups":
+    """The memo of ``samples``' medians (:class:`_Groups`), one per samples object while it
+    lives: a bank's samples are loaded once per process and never change (a live session's
+    windows, every utterance of a batch). Keyed on the object and the opening and width
+    arrays it holds (a table whose arrays were replaced is a new memo); an object that
+    takes no weak reference gets a fresh one each call."""
+    try:
+        ref = weakref.ref(samples)
+    except TypeError:
+        return _Groups(samples)
+    arrays = (id(samples.opening), id(samples.width))
+    with _GROUPS_LOCK:
+        got = _GROUPS.get(id(samples))
+        if got is not None and got[0]() is samples and got[1] == arrays:
+            return got[2]
+        for k in [k for k, v in _GROUPS.items() if v[0]() is None]:
+            del _GROUPS[k]
+        groups = _Groups(samples)
+        _GROUPS[id(samples)] = (ref, arrays, groups)
+        return groups
+
+
 def phone_schedule(samples, timeline, n: int, fps: float, pmap, rest: str, closures: Sequence[str], params=None):
     """``(opening, width)`` per frame predicted by the dominance model run over the *phones*
     (:func:`lipsync.motion.coarticulation.dominance_sequence`, each phone its own shape with its
     viseme's class; silence the rest), each phone valued at its samples' median: every sound
-    its own real opening rather than its viseme's. None for a timeline of visemes."""
+    its own real opening rather than its viseme's. None for a timeline of visemes.
+
+    The medians come from the samples' memo (:func:`_groups`, :data:`MEMO_MEDIANS`): a window
+    of a live session costs its own phones' dominance, not the samples' statistics again."""
     from ..motion.coarticulation import DEFAULT_PARAMS, VisemeClasses, dominance_sequence, predicted, viseme_classes
     from ..motion.timeline import Segment, Timeline
     from ..samples.build import SILENCE, phone_label
@@ -328,11 +404,31 @@ def phone_schedule(samples, timeline, n: int, fps: float, pmap, rest: str, closu
     specs = dominance_sequence(Timeline(tuple(segs), kind="viseme"), fps=fps, rest=SILENCE, closures=shut,
                                classes=classes, params=params if params is not None else DEFAULT_PARAMS,
                                duration=n / fps)[:n]
-    values = _medians(samples, samples.labels, set(labels) | {SILENCE}, set(shut) | {SILENCE})
-    for p in labels:  # a phone the footage never said: its viseme's samples
-        if not (samples.labels == p).any():
-            values[p] = _medians(samples, viseme_of(samples.labels, pmap, rest), {vis[p]}, closures)[vis[p]]
+    values = _phone_values(samples, labels, vis, shut, pmap, rest, closures)
     return predicted(specs, {k: x[0] for k, x in values.items()}), predicted(specs, {k: x[1] for k, x in values.items()})
+
+
+def _phone_values(samples, labels, vis, shut, pmap, rest: str, closures) -> Dict[str, tuple]:
+    """``phone -> (median opening, median width)`` for :func:`phone_schedule`: each phone's
+    samples (the closed ones for a closure and silence), a phone the footage never said its
+    viseme's samples."""
+    from ..samples.build import SILENCE
+
+    if not MEMO_MEDIANS:
+        values = _medians(samples, samples.labels, set(labels) | {SILENCE}, set(shut) | {SILENCE})
+        for p in labels:
+            if not (samples.labels == p).any():
+                values[p] = _medians(samples, viseme_of(samples.labels, pmap, rest), {vis[p]}, closures)[vis[p]]
+        return values
+    g = _groups(samples)
+    closed = set(shut) | {SILENCE}
+    values = {p: g.medians((p,), p in closed) for p in set(labels) | {SILENCE}}
+    unseen = [p for p in labels if p not in g.index]
+    if unseen:   # a phone the footage never said: its viseme's samples (the phones of that viseme)
+        of = dict(zip(g.index, viseme_of(g.names.astype(str), pmap, rest).tolist()))
+        for p in unseen:
+            values[p] = g.medians(tuple(sorted(x for x, v in of.items() if v == vis[p])), vis[p] in closures)
+    return values
 
 
 #: Join features kept: the principal components holding this share of their variance (the

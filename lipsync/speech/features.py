@@ -158,6 +158,11 @@ class RunningFeatures:
     far: over the whole utterance, once it has all been heard, exactly
     :func:`normalised`'s; before that, the statistics of what has been heard.
 
+    The statistics are kept as they go (Welford's update: exact over any number of rows, a
+    constant column stays exactly flat), so rows no reader needs again can be dropped
+    (:meth:`forget`): a session of hours holds the rows of its last seconds, not 19 MB an
+    hour.
+
     Parameters
     ----------
     sample_rate : int
@@ -173,6 +178,8 @@ class RunningFeatures:
     >>> run.finish(25)
     >>> bool(np.allclose(run.normalised(0, 25), normalised(frame_features(pcm, sr, 25)), atol=1e-9))
     True
+    >>> run.forget(20); run.add(np.zeros(8000, np.int16)); run.first <= 20 < len(run)
+    True
     """
 
     def __init__(self, sample_rate: int, fps: float):
@@ -180,16 +187,34 @@ class RunningFeatures:
         self.win, self.hop = int(round(WINDOW * self.sr)), int(round(HOP * self.sr))
         self._buf = np.zeros(self.win // 2)   # padded samples from window self._k's start on
         self._k = 0                           # the next window to compute
-        self._rows = np.zeros((256, MELS + 2))
+        self._rows = np.zeros((64, MELS + 2))    # final rows of frames self._first ..
+        self._first = 0
+        self._drop = 0                       # frames before this may be dropped (forget)
+        self._last = np.zeros(MELS + 2)      # the last final row
         self._sum = np.zeros(MELS + 2)       # of the rows in the frame being filled
         self._got = 0
         self._frame = 0                      # the frame being filled (rows before it are final)
-        self._s1 = np.zeros(MELS + 2)        # sums over the final rows (running statistics)
-        self._s2 = np.zeros(MELS + 2)
+        self._mean = np.zeros(MELS + 2)      # over the final rows (Welford: mean, sum of squared deviations)
+        self._m2 = np.zeros(MELS + 2)
 
     def __len__(self) -> int:
         """Frames whose row is final."""
         return self._frame
+
+    @property
+    def first(self) -> int:
+        """The first frame whose row is still held (:meth:`forget`)."""
+        return self._first
+
+    @property
+    def held(self) -> int:
+        """Rows held in memory (the buffer's capacity)."""
+        return len(self._rows)
+
+    def forget(self, before: int) -> None:
+        """Rows of frames before ``before`` will not be read again: they may be dropped
+        (the running statistics keep counting them)."""
+        self._drop = max(self._drop, int(before))
 
     def _which(self, k: np.ndarray) -> np.ndarray:
         return np.floor(k * self.hop / self.sr * self.fps).astype(np.int64)   # as frame_features
@@ -205,29 +230,46 @@ class RunningFeatures:
         idx = np.arange(count)[:, None] * self.hop + np.arange(self.win)[None, :]
         per_window = window_features(self._buf[idx], self.sr)
         which = self._which(np.arange(self._k, self._k + count))
-        for row, f in zip(per_window, which):
+        starts = np.r_[0, np.flatnonzero(np.diff(which)) + 1]   # each frame's windows, summed at once
+        sums = np.add.reduceat(per_window, starts, axis=0)
+        for f, total, got in zip(which[starts].tolist(), sums, np.diff(np.r_[starts, count]).tolist()):
             while f > self._frame:   # the frame is complete: its row is final
                 self._close()
-            self._sum += row
-            self._got += 1
+            self._sum += total
+            self._got += got
         self._k += count
         self._buf = self._buf[count * self.hop:]
         while self._which(np.array([self._k]))[0] > self._frame:   # no later window is this frame's
             self._close()
 
+    def _slot(self) -> int:
+        """The buffer row for frame ``self._frame``: forgotten rows dropped, or the buffer
+        doubled, when it is full."""
+        i = self._frame - self._first
+        if i >= len(self._rows):
+            drop = min(self._drop, self._frame) - self._first
+            if drop >= len(self._rows) // 4:   # amortised: a quarter of the buffer moves at most 3 times
+                self._rows[:i - drop] = self._rows[drop:i]
+                self._first += drop
+                i -= drop
+            else:
+                self._rows = np.vstack([self._rows, np.zeros_like(self._rows)])
+        return i
+
     def _close(self) -> None:
-        if self._frame >= len(self._rows):
-            self._rows = np.vstack([self._rows, np.zeros_like(self._rows)])
+        i = self._slot()
         if self._got:
             row = self._sum / self._got
         else:   # a frame shorter than a hop: the window after it (frame_features takes the nearest)
-            row = self._rows[self._frame - 1] if self._frame else np.zeros(MELS + 2)
-        self._rows[self._frame] = row
-        self._s1 += row
-        self._s2 += row * row
+            row = self._last.copy()
+        self._rows[i] = row
+        self._last = row
+        self._frame += 1
+        delta = row - self._mean
+        self._mean += delta / self._frame
+        self._m2 += delta * (row - self._mean)
         self._sum = np.zeros(MELS + 2)
         self._got = 0
-        self._frame += 1
 
     def finish(self, frames: int) -> None:
         """The audio has ended: the stream's first ``frames`` rows are made final (the sound
@@ -235,10 +277,14 @@ class RunningFeatures:
         while len(self) < frames:
             self.add(np.zeros(self.hop))
 
+    def rows(self, a: int, b: int) -> np.ndarray:
+        """Rows ``a .. b - 1`` as computed (final ones, held: ``a >= first``)."""
+        if a < self._first:
+            raise IndexError(f"rows before frame {self._first} were dropped (asked from {a})")
+        return self._rows[a - self._first:max(a, min(b, self._frame)) - self._first]
+
     def normalised(self, a: int, b: int) -> np.ndarray:
-        """Rows ``a .. b - 1`` (final ones) less the running mean, over the running standard
-        deviation (a flat column: 0)."""
-        n = max(len(self), 1)
-        mean = self._s1 / n
-        sd = np.sqrt(np.maximum(self._s2 / n - mean * mean, 0.0))
-        return (self._rows[a:b] - mean) / np.where(sd > 1e-9, sd, np.inf)
+        """Rows ``a .. b - 1`` (final ones, held) less the running mean, over the running
+        standard deviation (a flat column: 0)."""
+        sd = np.sqrt(self._m2 / max(self._frame, 1))
+        return (self.rows(a, b) - self._mean) / np.where(sd > 1e-9, sd, np.inf)

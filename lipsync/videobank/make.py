@@ -109,6 +109,11 @@ TIMING = "dominance"
 #: is the residual select.RESIDUAL_SCALE prices as one typical spread of mouth shapes (the
 #: head turned about 3 degrees).
 MOVED_RESIDUAL = 0.03
+#: The viseme pictures' resample (cv2 flag) from the video: bilinear, as they were always cut,
+#: so that ``--samples off`` renders a bank as before (the one-picture morph is the baseline
+#: the mouth samples are measured against, and it resamples its pictures at every frame
+#: anyway). The plate and the samples keep the footage's pixels (lipsync.videobank.cut).
+PICTURE_INTERPOLATION = 1  # cv2.INTER_LINEAR (cv2 is imported only where frames are cut)
 
 
 def _viseme_order(pmap) -> List[str]:
@@ -363,7 +368,7 @@ def cut_and_choose(footage: Footage, finalists: Dict[str, List[Candidate]], cfg:
                 m = fr.matrix(regs[i], f)
                 if fix is not None:
                     m = _compose(fix[(i, f)], m)
-                out[(i, f)] = warp_frame(img, m, fr.size)
+                out[(i, f)] = warp_frame(img, m, fr.size, interpolation=PICTURE_INTERPOLATION)
         return out
 
     frame = framing_for(flat)

@@ -14,10 +14,11 @@ edge), the **face above the nose moves as the speaker's does** (not stiller: wit
 :data:`NATURAL_BAND` of the footage's mean, :func:`upper_motion`), the **head moves least** (the still points' centre, frame to frame, and how far it
 wanders over the window) and turns least (the stabilisation residual), with the face found
 in every frame; shorter windows (down to 1.5 s) when no 4 s one keeps the head still.
-The frames are cut at the bank's framing by **one** transform, the stretch's mean pose
-(stabilised: the crop does not jitter with the tracker, while the head keeps its own
-motion inside it), and each frame's own pose is stored as the 2x3 matrix taking bank
-pixels to that plate frame's pixels.
+The frames are cut by **one** transform for the whole stretch (stabilised: the crop does
+not jitter with the tracker, while the head keeps its own motion inside it): the footage's
+own pixels, a whole-pixel window about where the stretch's mean pose puts the bank's
+picture (:func:`plate_cut`; a bank of another size is resampled at the mean pose), and each
+frame's own pose is stored as the 2x3 matrix taking bank pixels to that plate frame's pixels.
 
 Written into the bank (bank.yaml ``plate: {video: plate.mp4, poses: plate.json, mask:
 plate-mask.png}``):
@@ -63,6 +64,14 @@ SHORT_LENGTHS = (1.0, 0.5)
 #: the pasted lower face then shows it (a webcam speaker looking down at a keyboard,
 #: tools/other_face.py: 0.3-0.5 over 4 s; GRID's still speaker under 0.03).
 IDLE_SPREAD = 0.05
+#: The plate is the footage's own pixels, a whole-pixel window (:func:`plate_cut`), when the
+#: stretch's mean pose scales it by at most this share: the window then holds the framing's
+#: field to within 10 % (the eye line to the crop's bottom, stabilise.BOTTOM's 3.0 eye
+#: distances, stays above BOTTOM_NEEDED's 2.3; the sides' 2.6 above 1.3), while the resample
+#: it saves would keep only 0.92-0.97 of the mouth's Laplacian variance even with Lanczos4
+#: (lipsync.videobank.cut.INTERPOLATION) and 0.52-0.66 with the bilinear warp the plate had.
+#: A bank asked for another size (``--size``) or shrunk to ``max_side`` is resampled.
+PLATE_SCALE_BAND = 0.1
 #: x264 quality of plate.mp4: near-transparent (the plate is shown as it is in every frame,
 #: so its own compression would add to the render's).
 PLATE_CRF = 12
@@ -235,9 +244,44 @@ def _eyes(points: np.ndarray, found: np.ndarray) -> np.ndarray:
     return e
 
 
-def stretch_poses(framing, reg, start: int, stop: int) -> Tuple[np.ndarray, np.ndarray]:
+def plate_cut(matrix: np.ndarray, size: Tuple[int, int], source_size: Tuple[int, int]) -> np.ndarray:
+    """The plate's cut (2x3, video pixels -> plate pixels): the footage's own pixels, a
+    whole-pixel window of ``size`` (W, H) about where the stretch's mean pose ``matrix``
+    puts the plate's centre, kept inside the video's ``source_size`` picture -- unless the
+    mean pose scales by more than :data:`PLATE_SCALE_BAND` (or the picture is smaller than
+    the plate): then ``matrix`` itself (one resample, :data:`lipsync.videobank.cut.INTERPOLATION`).
+
+    The plate is shown as it is in every rendered frame, so a resample here would soften
+    every mouth pasted on it; the head's roll and the few per cent of scale the mean pose
+    would have taken out go into the per-frame poses instead (bank -> plate pixels), which
+    every paste and morph applies anyway.
+
+    Examples
+    --------
+    >>> m = np.array([[0.97, -0.02, -30.3], [0.02, 0.97, -20.6]])
+    >>> plate_cut(m, (100, 80), (360, 288)).tolist()
+    [[1.0, 0.0, -34.0], [0.0, 1.0, -21.0]]
+    >>> plate_cut(m * 0.5, (100, 80), (360, 288)).tolist() == (m * 0.5).tolist()   # half the size: resampled
+    True
+    """
+    from ..composite.plate import pose_inverse
+
+    m = np.asarray(matrix, np.float64)
+    (w, h), (sw, sh) = size, source_size
+    scale = float(np.sqrt(abs(np.linalg.det(m[:, :2]))))
+    if abs(scale - 1.0) > PLATE_SCALE_BAND or w > sw or h > sh:
+        return m
+    centre = pose_inverse(m) @ np.array([(w - 1) / 2.0, (h - 1) / 2.0, 1.0])
+    x = min(max(int(np.floor(centre[0] - (w - 1) / 2.0 + 0.5)), 0), sw - w)
+    y = min(max(int(np.floor(centre[1] - (h - 1) / 2.0 + 0.5)), 0), sh - h)
+    return np.array([[1.0, 0.0, -float(x)], [0.0, 1.0, -float(y)]])
+
+
+def stretch_poses(framing, reg, start: int, stop: int, source_size=None) -> Tuple[np.ndarray, np.ndarray]:
     """The plate's cut (2x3, video pixels -> plate pixels, one for the whole stretch: its
-    mean pose) and each frame's pose (``(N, 2, 3)``, bank pixels -> plate pixels)."""
+    mean pose; with the video's ``source_size`` (W, H), :func:`plate_cut`'s whole-pixel
+    window where it can) and each frame's pose (``(N, 2, 3)``, bank pixels -> plate pixels,
+    through that cut)."""
     from ..composite.plate import compose, pose_inverse
     from .stabilise import Registration
 
@@ -245,6 +289,8 @@ def stretch_poses(framing, reg, start: int, stop: int) -> Tuple[np.ndarray, np.n
     mean = Registration(c=np.array([reg.c[idx].mean()]), t=np.array([reg.t[idx].mean()]),
                         residual=np.zeros(1))
     cut = framing.matrix(mean, 0)
+    if source_size is not None:
+        cut = plate_cut(cut, framing.size, source_size)
     poses = np.stack([compose(cut, pose_inverse(framing.matrix(reg, int(f)))) for f in idx])
     return cut, poses
 
@@ -265,8 +311,9 @@ def write_plate(folder: Path, footage, framing, meshes, rest: str) -> str:
     s = choose_stretch(footage)
     src, tr, reg = footage.sources[s.video], footage.tracks[s.video], footage.regs[s.video]
     w, h = framing.size
-    cut, poses = stretch_poses(framing, reg, s.start, s.stop)
     frames = grab_frames(src.path, range(s.start, s.stop))
+    sh, sw = frames[s.start].shape[:2]
+    cut, poses = stretch_poses(framing, reg, s.start, s.stop, (sw, sh))
     with open_writer(folder / VIDEO_NAME, fps=tr.fps, size=(w, h), format="mp4", crf=PLATE_CRF,
                      preset="talking-head", quiet=True, frames=len(s)) as writer:
         for f in range(s.start, s.stop):
@@ -276,7 +323,9 @@ def write_plate(folder: Path, footage, framing, meshes, rest: str) -> str:
     doc = {"fps": tr.fps, "frames": len(s), "size": [w, h],
            "source": {"video": src.name, "start_frame": s.start, "stop_frame": s.stop,
                       "lower_face_motion": round(s.motion, 5), "pose_residual": round(s.residual, 5),
-                      "head_spread": round(s.spread, 5), "motion_above_nose_vs_footage": round(s.natural, 3)},
+                      "head_spread": round(s.spread, 5), "motion_above_nose_vs_footage": round(s.natural, 3),
+                      # the cut from the video's pixels (plate_cut: a whole-pixel window, or a resample)
+                      "cut": [round(float(x), 5) for x in cut.ravel()]},
            "poses": [[round(float(x), 5) for x in p.ravel()] for p in poses],
            # each frame's eye opening (face mesh, lipsync.face.measure): where its blinks are, which
            # the plate's timeline never joins into or out of (lipsync.composite.plate_time)
