@@ -37,6 +37,11 @@ AUDIO`` and ``lipsync dub`` do, joins as :data:`lipsync.selection.plan.JOIN_FRAM
 the other sample methods select for the phones' target alone. The dubs' speech is another
 GRID s1 sentence, so the voice is the bank's own speaker's.
 
+**Footage** rows: banks of :data:`FOOTAGE` sentences (the ten bank sentences and the tuning
+ones, :func:`footage_clips`), their target rows on the same judged sentences and, for the
+longest, the judged sentences rendered with the audio target: how lip r grows with the
+footage the samples and the audio lip model come from.
+
 Sharpness per stage: the source crops (the footage's mouth box) against the crops as
 stored (``samples.mp4`` decoded); then, in the lips' box over the held-out real frames, the
 bank's footage (what the samples are cut from), the plate under the render, each method
@@ -436,7 +441,7 @@ def _quality_rows(what: str, got, raw_sharp, reference: str, rows: List[dict], c
         lips = float(np.nanmedian(np.concatenate(g["lip_sharp"]))) / ref_lips
         jumps = np.concatenate(g["join_steps"]) if g.get("join_steps") else np.array([])
         row = {"figure": "samples", "case": f"{what}: {m} ({count} held-out sentences)",
-               "lip_r": round(float(np.nanmean(g["r"])), 3),
+               "lip_r": round(float(np.nanmean(g["r"])), 3), "lip_r_median": round(float(np.nanmedian(g["r"])), 3),
                "sharpness_vs_" + reference: round(sharp / ref_sharp, 3),
                "lips_sharpness_vs_" + reference: round(lips, 3),
                "pbm_closed": round(float(closed.mean()) if closed.size else float("nan"), 3),
@@ -532,12 +537,14 @@ def phones_target(on: bool = True):
         S.AUDIO_SHARE, S.AUDIO_OPEN_WEIGHT = keep
 
 
-def target_rows(bank, clips: List[str], rows: List[dict]) -> None:
+def target_rows(bank, clips: List[str], rows: List[dict], label: str = "") -> None:
     """Lip-opening r against the real speaker without rendering: of the speech's prediction
     alone, of the phones' target and the audio target, of the samples each selects (their
     stored openings, and blended across joins by the frame plan's alpha as a render morphs
     them: ``joins_blended_r``); and
-    an oracle (the real opening itself as the target: what the selection can reach)."""
+    an oracle (the real opening itself as the target: what the selection can reach). Each
+    the mean over ``clips`` and (``_median``) their median; ``label`` names the bank in the
+    rows' case (empty: the figure's bank)."""
     from ..motion.coarticulation import DominanceParams
     from ..pipeline.animator import Animator
     from ..pipeline.samplepath import _selector, bank_samples, speech_prediction
@@ -572,15 +579,79 @@ def target_rows(bank, clips: List[str], rows: List[dict]) -> None:
                                                            alpha * samples.opening[dst]))
             got.setdefault(name + " runs", []).append(s.runs())
     m = {k: round(float(np.mean(v)), 3) for k, v in got.items()}
+    med = {k: round(float(np.median(v)), 3) for k, v in got.items()}
     case = f"({len(clips)} held-out sentences, no render)"
-    rows.append({"figure": "samples", "case": f"target: the speech's prediction alone {case}",
-                 "lip_r": m["prediction"]})
+    head = f"target, {label}" if label else "target"
+    rows.append({"figure": "samples", "case": f"{head}: the speech's prediction alone {case}",
+                 "lip_r": m["prediction"], "lip_r_median": med["prediction"]})
     for name, what in (("phones", "today's target (phones, pictures)"),
                        ("audio", f"audio target (share {S.AUDIO_SHARE[0]} of the prediction)"),
                        ("oracle", "oracle target (the real opening and width)")):
-        rows.append({"figure": "samples", "case": f"target: {what} {case}", "target_r": m[name + " target"],
-                     "selected_r": m[name + " selected"], "joins_blended_r": m[name + " planned"],
+        rows.append({"figure": "samples", "case": f"{head}: {what} {case}", "target_r": m[name + " target"],
+                     "target_r_median": med[name + " target"], "selected_r": m[name + " selected"],
+                     "selected_r_median": med[name + " selected"], "joins_blended_r": m[name + " planned"],
                      "mean_run_frames": round(m[name + " runs"], 2)})
+
+
+#: Sentences in the longer banks of the footage rows (:func:`_footage_rows`): the figure's
+#: bank's ten (:data:`~lipsync.bench.grid.BANK_CLIPS`, 30 s) and the first tuning sentences
+#: (``held_out()[TUNED_FROM:]``), judged on the same ``held_out()[:TUNED_FROM]``, so the rows
+#: show how r grows with the footage (Wang et al. select from ~20 minutes; GRID s1 has 66 s
+#: outside the judged sentences). No constant is re-tuned for them.
+FOOTAGE = (16, 22)
+
+
+def footage_clips(bank_clips, held, count: int) -> List[str]:
+    """The ``count`` sentences of a longer bank: ``bank_clips``, then the tuning sentences
+    (``held[TUNED_FROM:]``) in order; never a judged one (``held[:TUNED_FROM]``).
+
+    Examples
+    --------
+    >>> footage_clips(["a", "b"], [f"h{i}" for i in range(22)], 4)
+    ['a', 'b', 'h18', 'h19']
+    """
+    extra = list(held[TUNED_FROM:])[:max(0, count - len(bank_clips))]
+    if len(bank_clips) + len(extra) < count:
+        raise ValueError(f"{count} sentences asked: only {len(bank_clips) + len(extra)} are outside the judged ones")
+    return list(bank_clips)[:count] + extra
+
+
+def _footage_rows(ctx: Context, judged: List[str], mesh, rows: List[dict]) -> None:
+    """Banks of :data:`FOOTAGE` sentences: their target rows (:func:`target_rows`) on the
+    judged sentences and, for the longest, the judged sentences rendered with the audio
+    target (lip r of the decoded frames, as the render rows measure it)."""
+    from ..banks.bank import Bank
+    from ..face import measure as M
+    from ..face.track import track_frames
+
+    held = grid.held_out()
+    for count in FOOTAGE:
+        names = footage_clips(grid.BANK_CLIPS, held, count)
+        if not all(grid.video(c).is_file() for c in names):
+            continue
+        videos = [grid.video(c) for c in names]
+        seconds = sum(len(grid.track(c)) / grid.track(c).fps for c in names)
+        bank = Bank.load(_make(ctx.tmp / f"samples-bank-{count}", videos,
+                               {v: grid.transcript(c) for v, c in zip(videos, names)}))
+        label = f"bank of {count} sentences ({seconds:.0f} s)"
+        target_rows(bank, judged, rows, label)
+        if count != FOOTAGE[-1]:
+            continue
+        method, rs, ratio = METHODS[0], [], []  # ratio: (shown, real) openings
+        for clip in judged:
+            fps = grid.track(clip).fps
+            frames, _ = _frames(bank, clip, method)
+            tr = track_frames(_encoded(frames, ctx.tmp, fps), fps=fps, mesh=mesh)
+            real = grid.real_measures(clip)["opening"]
+            n = min(len(frames), len(real))
+            opening = M.lip_opening(tr.points)[:n]
+            rs.append(grid.correlation(opening, real[:n]))
+            ok = np.isfinite(opening) & np.isfinite(real[:n])
+            ratio.append((opening[ok], real[:n][ok]))
+        shown, said = (np.concatenate(x) for x in zip(*ratio))
+        rows.append({"figure": "samples", "case": f"render, {label}: {method} ({len(judged)} held-out sentences)",
+                     "lip_r": round(float(np.mean(rs)), 3), "lip_r_median": round(float(np.median(rs)), 3),
+                     "range": round(float(shown.std() / said.std()), 3)})
 
 
 def _stage_rows(bank, rows: List[dict]) -> None:
@@ -754,6 +825,8 @@ def samples_figures(ctx: Context, rows: List[dict]) -> None:
     level = _render_rows(ctx, bank, judged[:6] if ctx.quick else judged, mesh, rows)
     pairs = list(zip(judged[0::2], judged[1::2]))[: 3 if ctx.quick else 10]
     _dub_rows(ctx, bank, pairs, mesh, rows, level)
+    if not ctx.quick:
+        _footage_rows(ctx, judged, mesh, rows)
     a, b = held[:2]
     big = _with_sound(videos[:3], ctx.tmp)
     bank720 = _make(ctx.tmp / "samples-bank-720p", big, {p: texts[v] for p, v in zip(big, videos)})

@@ -37,6 +37,15 @@ FEATURES = MELS + 2
 #: sentences): 2 / 3 / 4 frames gave 0.760 / 0.758 / 0.756 (more context, more weights than
 #: 30 s of footage pins down); adding deltas (0.759 / 0.756 / 0.753) or 13 cepstra in place
 #: of the mel bands (0.751 / 0.747 / 0.740) did no better. 3 keeps 120 ms either side.
+#: Round 5 (issue 35), prediction r on the same sentences: a linear model of these features
+#: is at its ceiling. Smoothing the prediction (Gaussian, sigma 1 / 1.5 / 2 frames: 0.762 /
+#: 0.750 / 0.730; real openings peak for 1-3 frames, and a shift of one frame costs 0.06);
+#: trajectory generation (static, delta and delta-delta predicted, the smooth path solved
+#: for, Tokuda's MLPG: 0.763); spectral centroids, an F1 peak, zero crossings (0.741-0.748);
+#: k nearest bank frames in whitened feature space (0.62-0.69); context 5 / 7 with more
+#: footage (leave-one-sentence-out over the 22 sentences outside the judged ones: 0.755 /
+#: 0.758 against 3's 0.756). Footage helps a little, then levels: 5 / 10 / 15 / 21
+#: training sentences gave 0.704 / 0.735 / 0.753 / 0.751 (random splits of those 22).
 CONTEXT = 3
 #: The most context a stored model may have (a bound on the arrays ``lipsync check`` reads).
 MAX_CONTEXT = 12
