@@ -241,8 +241,7 @@ def make_target(samples, specs, timeline, fps: float, pmap, rest: str, closures:
     by_phone = phone_schedule(samples, timeline, n, fps, pmap, rest, closures, params)
     if by_phone is not None:
         opening, width = by_phone
-        rest_open = float(np.median(samples.opening[(samples.labels == "sil") & (samples.opening <= CLOSED)])) if (
-            (samples.labels == "sil") & (samples.opening <= CLOSED)).any() else 0.0
+        rest_open = _groups(samples).rest_opening() if MEMO_MEDIANS else _rest_opening(samples.labels, samples.opening)
         opening = rest_open + TARGET_GAIN * (opening - rest_open)
         pictures = picture_openings(samples)
         if pictures and all(s.from_viseme in pictures and s.to_viseme in pictures for s in specs):
@@ -350,6 +349,30 @@ class _Groups:
             pick = mine if mine.any() else slice(None)
             got = self._done[key] = (float(np.median(self.opening[pick])), float(np.median(self.width[pick])))
         return got
+
+
+    def rest_opening(self) -> float:
+        """:func:`_rest_opening` of these samples, computed once (every window's target reads
+        it, and it scans the whole table)."""
+        got = self._done.get("rest")
+        if got is None:
+            got = self._done["rest"] = _rest_opening(self.names[self.inverse], self.opening)
+        return got
+
+
+def _rest_opening(labels: np.ndarray, opening: np.ndarray) -> float:
+    """The lips' opening at rest: the median of the silent samples with closed lips (0 when
+    the footage has none).
+
+    Examples
+    --------
+    >>> _rest_opening(np.array(["sil", "sil", "a", "sil"]), np.array([0.01, 0.03, 0.0, 0.2]))
+    0.02
+    >>> _rest_opening(np.array(["a"]), np.array([0.01]))
+    0.0
+    """
+    quiet = (np.asarray(labels) == "sil") & (opening <= CLOSED)
+    return float(np.median(opening[quiet])) if quiet.any() else 0.0
 
 
 #: id(samples) -> (weak reference to it, the arrays read, its _Groups): see :func:`_groups`.
