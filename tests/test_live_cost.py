@@ -28,6 +28,8 @@ from lipsync.live.audio import BLOCK, RATE
 from lipsync.selection import select as S
 from lipsync.speech.audio import load_audio
 
+from live_session import audio_session
+
 AUDIO = Path(__file__).resolve().parent / "data" / "grid-s1-audio"
 GRID_BANK = default_bank_dir().parent / "grid-s1"
 
@@ -43,14 +45,7 @@ def pcm():
 
 
 def _audio_session(bank, pcm):
-    live = LiveAnimator(bank, fps=25, prepare=False, samples="on")
-    frames = {}
-    for i in range(0, len(pcm), BLOCK):
-        for n in live.feed_audio(pcm[i:i + BLOCK], RATE):
-            frames[n] = live.frame(n).copy()
-    for n in live.finish_audio():
-        frames[n] = live.frame(n).copy()
-    return live, frames
+    return audio_session(bank, pcm, prepare=False, samples="on")
 
 
 def test_memoised_medians_fix_the_same_samples_and_pixels_as_computing_them_afresh(bank, pcm, monkeypatch):

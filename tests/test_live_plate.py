@@ -27,6 +27,8 @@ from lipsync.live.audio import BLOCK, RATE
 from lipsync.live.pool import shared_plate
 from lipsync.speech.audio import load_audio
 
+from live_session import audio_session
+
 ROOT = Path(__file__).resolve().parents[1]
 AUDIO = ROOT / "tests" / "data" / "grid-s1-audio"
 GRID_BANK = default_bank_dir().parent / "grid-s1"
@@ -68,15 +70,7 @@ def _blinks(frames, mesh) -> list:
 
 
 def _session_frames(bank, pcm, **options):
-    """Feed in 20 ms chunks; render each frame when it falls due (and the last ones at the end)."""
-    live = LiveAnimator(bank, fps=25, **options)
-    frames = {}
-    for i in range(0, len(pcm), BLOCK):
-        for n in live.feed_audio(pcm[i:i + BLOCK], RATE):
-            frames[n] = live.frame(n).copy()
-    for n in live.finish_audio():
-        frames[n] = live.frame(n).copy()
-    return live, frames
+    return audio_session(bank, pcm, **options)
 
 
 def test_a_live_session_shows_the_plate_and_equals_render_live(bank, speech, tmp_path):

@@ -33,12 +33,14 @@ import pytest
 from lipsync import Animator, Bank
 from lipsync._data import default_bank_dir
 from lipsync.live import LiveAnimator
-from lipsync.live.audio import BLOCK, RATE
+from lipsync.live.audio import RATE
 from lipsync.live.samples import shared_samples
 from lipsync.motion.timeline import Segment, Timeline
 from lipsync.samples import load_samples
 from lipsync.selection import frame_plan
 from lipsync.speech.audio import load_audio
+
+from live_session import audio_session
 
 ROOT = Path(__file__).resolve().parents[1]
 GRID_BANK = default_bank_dir().parent / "grid-s1"
@@ -157,14 +159,7 @@ def _wav(path, pcm):
 
 
 def _session(bank, pcm, **options):
-    live = LiveAnimator(bank, fps=25, prepare=False, **options)
-    frames = {}
-    for i in range(0, len(pcm), BLOCK):
-        for n in live.feed_audio(pcm[i:i + BLOCK], RATE):
-            frames[n] = live.frame(n).copy()
-    for n in live.finish_audio():
-        frames[n] = live.frame(n).copy()
-    return live, frames
+    return audio_session(bank, pcm, prepare=False, **options)
 
 
 def test_render_live_writes_the_sessions_samples_and_off_its_morph(bank, tmp_path):

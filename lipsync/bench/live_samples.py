@@ -101,7 +101,10 @@ def _session_cost(bank, pcm, fps: float, samples: str, audio_target: bool = True
         LS.LIVE_AUDIO_SHARE = keep
 
 
-def _session_run(bank, pcm, fps: float, samples: str) -> Dict[str, float]:
+def _session_run(bank, pcm, fps: float, samples: str) -> Dict[str, object]:
+    """One audio session fed in blocks, each frame rendered when due: CPU seconds (this
+    thread) of feeding and of rendering, its frames and, with samples, its selection's
+    windows, seconds and fixed path."""
     from ..live import LiveAnimator
     from ..live.audio import BLOCK, RATE
 
@@ -123,7 +126,7 @@ def _session_run(bank, pcm, fps: float, samples: str) -> Dict[str, float]:
     got = {"frames": frames, "feed": feed, "render": render}
     if live.samples is not None:
         sel = live.samples.selection
-        got.update(windows=sel.windows, select=sel.seconds, window_frames=sel.window_frames)
+        got.update(windows=sel.windows, select=sel.seconds, window_frames=sel.window_frames, path=list(sel.path))
     return got
 
 

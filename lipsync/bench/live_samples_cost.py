@@ -35,31 +35,16 @@ from . import grid
 def _session(bank, pcm, fps: float, memo: bool, samples: str = "on") -> Dict[str, object]:
     """One audio session: CPU seconds (this thread) of feeding and of rendering, its frames,
     its selection's seconds and its fixed path (``samples="off"``: the viseme morph, none)."""
-    from ..live import LiveAnimator
-    from ..live.audio import BLOCK, RATE
     from ..selection import select as S
+    from .live_samples import _session_run
 
     keep = S.MEMO_MEDIANS
     S.MEMO_MEDIANS = memo
     try:
-        live = LiveAnimator(bank, fps=fps, prepare=False, samples=samples)
-        clock = time.thread_time
-        if live.samples is not None:
-            live.samples.selection.clock = clock
-        feed = render = 0.0
-        frames = 0
-        for i in range(0, len(pcm), BLOCK):
-            t0 = clock()
-            due = live.feed_audio(pcm[i:i + BLOCK], RATE)
-            feed += clock() - t0
-            for n in due:
-                t0 = clock()
-                live.frame(n)
-                render += clock() - t0
-                frames += 1
-        sel = live.samples.selection if live.samples is not None else None
-        return {"feed": feed, "render": render, "frames": frames, "select": sel.seconds if sel else 0.0,
-                "path": list(sel.path) if sel else []}
+        got = _session_run(bank, pcm, fps, samples)
+        got.setdefault("select", 0.0)
+        got.setdefault("path", [])
+        return got
     finally:
         S.MEMO_MEDIANS = keep
 
