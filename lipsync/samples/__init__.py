@@ -11,7 +11,9 @@ with one warp.
 
 * :mod:`.store` — the on-disk format (``samples.mp4`` + ``samples.npz`` beside
   bank.yaml), loading and validation;
-* :mod:`.build` — making them from the footage (called by :func:`lipsync.videobank.make_bank`).
+* :mod:`.build` — making them from the footage (called by :func:`lipsync.videobank.make_bank`);
+* :mod:`.quality` — how sharp each sample's lips are, and how much softer than usual for
+  its opening (motion blur), which the selection charges.
 
 Examples
 --------
