@@ -46,6 +46,11 @@ FEATURES = MELS + 2
 #: footage (leave-one-sentence-out over the 22 sentences outside the judged ones: 0.755 /
 #: 0.758 against 3's 0.756). Footage helps a little, then levels: 5 / 10 / 15 / 21
 #: training sentences gave 0.704 / 0.735 / 0.753 / 0.751 (random splits of those 22).
+#: Nonlinear models of the same features (scikit-learn, scratch only), trained on the ten
+#: bank sentences: extra trees 0.782, an RBF kernel ridge 0.778, a 64-unit MLP (5 seeds
+#: averaged) 0.776, their average 0.792, against the ridge's 0.757; but as the target's
+#: share the chosen samples' r moved only 0.783 -> 0.784-0.791: not worth a dependency or a
+#: hand-written network.
 CONTEXT = 3
 #: The most context a stored model may have (a bound on the arrays ``lipsync check`` reads).
 MAX_CONTEXT = 12
