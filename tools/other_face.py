@@ -38,6 +38,10 @@ prints against the clip's own frames (re-encoded the same way; a dub: frame for 
 
 ``--sheets DIR`` writes full-size mouth crops of the frames around the largest joins
 (``join-*.png``: before, the join, after; samples with joins morphed above, cut below).
+``--bank DIR`` keeps the bank there (and reuses it when it is already made: a before/after
+comparison on the same bank); ``--default-only`` runs the default way alone (the first of :data:`METHODS`; the tool passes no sound, so its target is the phones').
+Each samples row ends with the share of its frames whose mouth was a sample pasted
+as a whole-pixel copy, a sample resampled, or a morph across a join (``pastes``).
 """
 
 from __future__ import annotations
@@ -65,6 +69,51 @@ from lipsync.bench.samples import METHODS  # noqa: E402  (the tool runs from the
 
 #: The dub's ways (hard cuts is a render-only baseline).
 DUB_METHODS = METHODS[:3]
+
+
+class _Pastes:
+    """Counts what each frame's mouth was while it is entered: a sample copied at a whole-pixel
+    offset, a sample resampled (its map onto the frame turns or scales it), or a morph across a
+    join (:meth:`lipsync.composite.samples.SampleCompositor.render`'s three cases)."""
+
+    def __enter__(self):
+        from lipsync.composite.plate import compose
+        from lipsync.composite.samples import SampleCompositor, whole_shift
+        from lipsync.selection import Selector
+
+        self.kinds = {"whole-pixel": 0, "resampled": 0, "morphed": 0}
+        self._orig = orig = SampleCompositor.render
+        self._select = select = Selector.select
+        kinds = self.kinds
+        #: The selection made inside (a dub's: its joins).
+        self.selection = None
+
+        def selecting(sel, *args, **kwargs):
+            self.selection = select(sel, *args, **kwargs)
+            return self.selection
+
+        def render(sc, src, dst, alpha, plate, pose, prepared=None, geometry=None):
+            if alpha < 1.0 and src != dst:
+                kinds["morphed"] += 1
+            else:
+                s = sc.samples
+                copy = whole_shift(compose(pose, s.affine[dst]), s.crops.shape[1:3]) is not None
+                kinds["whole-pixel" if copy else "resampled"] += 1
+            return orig(sc, src, dst, alpha, plate, pose, prepared=prepared, geometry=geometry)
+
+        SampleCompositor.render, Selector.select = render, selecting
+        return self
+
+    def __exit__(self, *exc):
+        from lipsync.composite.samples import SampleCompositor
+        from lipsync.selection import Selector
+
+        SampleCompositor.render, Selector.select = self._orig, self._select
+
+    def row(self) -> dict:
+        n = max(sum(self.kinds.values()), 1)
+        return {"pastes whole-pixel / resampled / morphed": " / ".join(
+            f"{v / n:.2f}" for v in self.kinds.values())} if sum(self.kinds.values()) else {}
 
 
 def _decoded(path: Path) -> List[np.ndarray]:
@@ -128,7 +177,7 @@ def _timeline(bank, fps: float):
     return anim.alignment.phones, anim
 
 
-def _renders(bank, clip: Path, tmp: Path, mesh, closures, sheets: Optional[Path]) -> tuple:
+def _renders(bank, clip: Path, tmp: Path, mesh, closures, sheets: Optional[Path], methods=METHODS) -> tuple:
     """hello.wav rendered on the bank's plate each way: the rows (against the clip's own
     frames) and the clip's own measures."""
     from lipsync.bench.samples import _encoded, render_method
@@ -139,18 +188,18 @@ def _renders(bank, clip: Path, tmp: Path, mesh, closures, sheets: Optional[Path]
     ref = _measures(_encoded(source, tmp, fps), fps, mesh)
     phones, base = _timeline(bank, fps)
     rows, shown = {}, {}
-    for m in METHODS:
-        with warnings.catch_warnings():
+    for m in methods:
+        with warnings.catch_warnings(), _Pastes() as pastes:
             warnings.simplefilter("ignore")
             frames, anim = render_method(bank, phones, fps, m)
         sp = anim.sample_path
         joins = None if sp is None else sp.selection.joins
         got = _measures(_encoded(frames, tmp, fps), fps, mesh, anim.specs, closures, joins)
-        rows[f"render: {m}"] = _row(got, ref, _measures(frames, fps, mesh))
+        rows[f"render: {m}"] = {**_row(got, ref, _measures(frames, fps, mesh)), **pastes.row()}
         shown[m] = (frames, joins)
         if m == METHODS[0]:
             rows[f"stages: {m}"] = _stages(anim, source, fps, mesh, ref)
-    if sheets is not None:
+    if sheets is not None and "samples, joins morphed" in shown:
         _join_sheets(shown, mesh, fps, sheets)
     return rows, ref
 
@@ -183,22 +232,29 @@ def _stages(anim, source, fps: float, mesh, ref: dict) -> dict:
         pose = plate.poses[plate.index(i, fps, anim.plate_line)]
         kinds["whole-pixel" if whole_shift(compose(pose, s.affine[b]), (h, w)) is not None else "resampled"] += 1
     pm = _measures(list(plate.frames), plate.fps, mesh)
+    # the frames the render's samples were cut from, as the reference measured them: a
+    # render saying other words shows other mouths (closed ones have no teeth's edges), so
+    # its lips are judged against the clip's own frames it shows, frame for frame
+    lips = np.asarray(ref["lips"], np.float64)
+    shown = [lips[int(s.frame[int(sp.dst[i])])] for i in range(len(sp))
+             if int(s.clip[int(sp.dst[i])]) == 0 and int(s.frame[int(sp.dst[i])]) < len(lips)]
     import json
 
     cut = json.loads(anim.bank.plate.poses.read_text())["source"].get("cut")
     return {"crops as stored": round(float(np.median(ratios)), 3) if ratios else None,
             "plate lips' sharpness": round(float(np.nanmedian(pm["lips"]) / np.nanmedian(ref["lips"])), 3),
+            "shown samples' own frames' lips": round(float(np.nanmedian(shown) / np.nanmedian(lips)), 3)
+            if shown else None,
             "plate cut": "none" if cut is None else ("whole-pixel" if cut[:2] == [1.0, 0.0] and cut[3:5] == [0.0, 1.0]
                                                       and float(cut[2]).is_integer() else "resampled"),
             **{f"frames {k}": round(v / max(len(sp), 1), 3) for k, v in kinds.items()}}
 
 
-def _dubs(bank_dir: Path, clip: Path, tmp: Path, mesh, closures, ref: dict) -> Dict[str, dict]:
+def _dubs(bank_dir: Path, clip: Path, tmp: Path, mesh, closures, ref: dict, methods=DUB_METHODS) -> Dict[str, dict]:
     """The clip re-voiced with hello.wav each way (its own bank), frame for frame against its own frames."""
     from lipsync import Animator, Bank
     from lipsync.face.video import probe_video
     from lipsync.pipeline.dubbing import dub
-    from lipsync.pipeline.samplepath import SamplePath, bank_samples
     from lipsync.selection import plan
     from lipsync.bench.samples import JOINS
 
@@ -206,15 +262,12 @@ def _dubs(bank_dir: Path, clip: Path, tmp: Path, mesh, closures, ref: dict) -> D
     fps = probe_video(clip).fps
     phones, _ = _timeline(bank, fps)
     anim = Animator(bank, phones, fps=fps, samples="off", still=True)
-    s = bank_samples(bank, "on")
-    joins = None if s is None else SamplePath(s, anim.specs, anim.phones, anim.fps, anim.pmap, bank.rest,
-                                              timing=anim.timing).selection.joins
     rows = {}
-    for m in DUB_METHODS:
+    for m in methods:
         out = tmp / "dub.mp4"
         keep, plan.JOIN_FRAMES = plan.JOIN_FRAMES, JOINS.get(m, plan.JOIN_FRAMES)
         try:
-            with warnings.catch_warnings():
+            with warnings.catch_warnings(), _Pastes() as pastes:
                 warnings.simplefilter("ignore")
                 dub(clip, ROOT / "samples" / "hello.wav", out, text=(ROOT / "samples" / "hello.lab").read_text(),
                     bank=bank, quiet=True, cache=tmp / "cache", samples="on" if m.startswith("samples") else "off")
@@ -224,8 +277,9 @@ def _dubs(bank_dir: Path, clip: Path, tmp: Path, mesh, closures, ref: dict) -> D
         n = len(frames)
         own = {k: (v[:n] if isinstance(v, np.ndarray) and k in ("sharp", "lips", "opening") else v)
                for k, v in ref.items()}  # the same frames of the input
-        got = _measures(frames, fps, mesh, anim.specs, closures, joins if m.startswith("samples") else None)
-        rows[f"dub: {m}"] = _row(got, own)
+        joins = pastes.selection.joins if m.startswith("samples") and pastes.selection is not None else None
+        got = _measures(frames, fps, mesh, anim.specs, closures, joins)
+        rows[f"dub: {m}"] = {**_row(got, own), **pastes.row()}
     return rows
 
 
@@ -261,6 +315,8 @@ def main(argv=None) -> int:
     ap.add_argument("video", type=Path)
     ap.add_argument("--crop", help="W:H:X:Y of the face's part of the picture (ffmpeg crop)")
     ap.add_argument("--sheets", type=Path, help="write mouth crops around the largest joins here")
+    ap.add_argument("--bank", type=Path, help="make the bank here and keep it (reused when already made)")
+    ap.add_argument("--default-only", action="store_true", help="only the default way (samples, joins cut)")
     args = ap.parse_args(argv)
     import imageio_ffmpeg
 
@@ -276,8 +332,9 @@ def main(argv=None) -> int:
         crop = ["-vf", f"crop={args.crop}"] if args.crop else []
         _run([ffmpeg, "-loglevel", "error", "-y", "-i", str(args.video), *crop, "-c:v", "libx264", "-crf", "16",
               "-c:a", "aac", str(clip)])
-        bank_dir = tmp / "bank"
-        _run([sys.executable, "-m", "lipsync", "init", str(bank_dir), "--video", str(clip), "-q"])
+        bank_dir = args.bank or tmp / "bank"
+        if not (bank_dir / "bank.yaml").exists():
+            _run([sys.executable, "-m", "lipsync", "init", str(bank_dir), "--video", str(clip), "-q"])
         rep = json.loads((bank_dir / "init-report.json").read_text())
         bank = Bank.load(bank_dir)
         print("bank:", {"seconds": round(sum(rep["seconds"].values()), 1), "size": rep["size"],
@@ -287,8 +344,9 @@ def main(argv=None) -> int:
         print("pictures' lip opening:", {k: round(v, 3) for k, v in bank_values(bank).items()})
         mesh = FaceMesh()
         closures = load_map(DEFAULT_MAP).closures  # the bank is made with the default map
-        rows, ref = _renders(bank, clip, tmp, mesh, closures, args.sheets)
-        rows.update(_dubs(bank_dir, clip, tmp, mesh, closures, ref))
+        only = METHODS[:1] if args.default_only else None  # the default: joins as the product plans them
+        rows, ref = _renders(bank, clip, tmp, mesh, closures, args.sheets, only or METHODS)
+        rows.update(_dubs(bank_dir, clip, tmp, mesh, closures, ref, only or DUB_METHODS))
         print("against the clip's own frames (re-encoded as the product encodes):")
         _print(rows)
     return 0
