@@ -548,14 +548,12 @@ class Selector:
                 return self._pools[key]
         raise AssertionError("unreachable: the '*' pools always exist")
 
-    def allowed(self, ids: np.ndarray, kind: str, viseme: str) -> np.ndarray:
-        """Which of ``ids`` a frame of ``kind`` (any, closed, rest) showing ``viseme`` may
-        show: any sample, or for a closed or resting frame only its :meth:`pool`'s (a run
-        continued into a closure must reach that viseme's closed lips: a silent sample's
-        lips are closed too, but relaxed, not pressed as for P/B/M)."""
+    def allowed(self, ids: np.ndarray, kind: str) -> np.ndarray:
+        """Which of ``ids`` a frame of ``kind`` (any, closed, rest) may show."""
         if kind == "any":
             return np.ones(len(ids), bool)
-        return np.isin(ids, self.pool(viseme, kind)[0])
+        ok = self.samples.opening[ids] <= CLOSED
+        return ok & (self.labels[ids] == "sil") if kind == "rest" else ok
 
     def target_cost(self, ids: np.ndarray, tg: Target, t: int, codes=None) -> np.ndarray:
         """The target cost of each of ``ids`` at frame ``t`` (see :data:`WEIGHTS`); ``codes``:
@@ -593,7 +591,7 @@ class Selector:
             order = np.argsort(v.costs)[:FOLLOW]
             nxt = self.succ[v.last[order]]
             nxt = nxt[nxt >= 0]
-            ids = np.concatenate([ids, nxt[self.allowed(nxt, kind, tg.viseme[t])]])
+            ids = np.concatenate([ids, nxt[self.allowed(nxt, kind)]])
         return np.unique(ids)
 
     def select(self, specs, timeline, fps: float, params=None, audio=None) -> Selection:
