@@ -89,3 +89,25 @@ def test_the_selection_takes_the_crisp_footage(monkeypatch):
     r_off = np.corrcoef(s.opening[off.samples], off.target.opening)[0, 1]
     r_on = np.corrcoef(s.opening[on.samples], on.target.opening)[0, 1]
     assert r_on > r_off - 0.05, (r_on, r_off)
+
+
+def test_a_closure_pays_no_blur(monkeypatch):
+    """Lips pressing for P/B/M move fast, so the footage's pressed frames are its soft ones: a
+    closure frame's costs are the same whatever the blur weight; any other frame's grow by
+    the weight times each candidate's softness."""
+    bank = Bank.load(GRID_BANK)
+    s = load_samples(bank)
+    anim = Animator(bank, SENTENCE.with_name("bbwm5s.align"), fps=25, samples="off")   # "bin blue with m ..."
+    sel = S.Selector(s, anim.pmap, bank.rest, closures=anim.pmap.closures)
+    tg = sel.select(anim.specs, anim.phones, anim.fps).target
+    shut, open_ = np.nonzero(tg.closed)[0], np.nonzero(~tg.closed & ~tg.rest)[0]
+    assert len(shut) and len(open_)
+    ids = np.arange(len(s))
+    for t, exempt in ((shut[0], True), (open_[len(open_) // 2], False)):
+        monkeypatch.setitem(S.WEIGHTS, "blur", 0.0)
+        without = sel.target_cost(ids, tg, int(t))
+        monkeypatch.setitem(S.WEIGHTS, "blur", 7.0)
+        with_ = sel.target_cost(ids, tg, int(t))
+        expected = np.zeros(len(s)) if exempt else 7.0 * softness(s)
+        assert with_ - without == pytest.approx(expected, abs=1e-9)
+    assert softness(s).max() > 0.2                        # the bank has soft samples to charge
