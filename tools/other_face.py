@@ -198,24 +198,22 @@ def _renders(bank, clip: Path, tmp: Path, mesh, closures, sheets: Optional[Path]
         rows[f"render: {m}"] = {**_row(got, ref, _measures(frames, fps, mesh)), **pastes.row()}
         shown[m] = (frames, joins)
         if m == METHODS[0]:
-            rows[f"stages: {m}"] = _stages(anim, source, fps, mesh, ref)
+            rows[f"stages: {m}"] = _stages(anim, source, mesh, ref)
     if sheets is not None and "samples, joins morphed" in shown:
         _join_sheets(shown, mesh, fps, sheets)
     return rows, ref
 
 
-def _stages(anim, source, fps: float, mesh, ref: dict) -> dict:
+def _stages(anim, source, mesh, ref: dict) -> dict:
     """What happens to the render's mouth between the source frame and the output, stage by
     stage (issue 35: count every resample): the samples' crops as stored (samples.mp4)
     against the same crops cut from the decoded clip (Laplacian variance, median ratio);
     the plate under the render (its lips' sharpness over the clip's, re-encoded as the
     product does: the same reference as the rows), and whether it was cut whole-pixel; the
-    frames whose mouth is a sample pasted whole-pixel (no resample), pasted through a
-    resample, or morphed across a join (two resamples and a blend)."""
-    from lipsync.composite.plate import compose
-    from lipsync.composite.samples import whole_shift
+    clip's own frames the render shows. What each frame's paste was (whole-pixel, resampled,
+    morphed) is the render row's ``pastes`` (:class:`_Pastes`)."""
     from lipsync.samples.build import _cut
-    from lipsync.videobank.select import sharpness
+    from lipsync.samples.quality import sharpness
 
     sp, plate = anim.sample_path, anim.plate
     s = sp.samples
@@ -223,14 +221,6 @@ def _stages(anim, source, fps: float, mesh, ref: dict) -> dict:
     ratios = [sharpness(s.crops[k], (0, 0, w, h)) / max(sharpness(np.ascontiguousarray(
         _cut(source[int(s.frame[k])], tuple(int(x) for x in s.origin[k]), (w, h))), (0, 0, w, h)), 1e-9)
         for k in range(len(s.crops)) if int(s.clip[k]) == 0 and int(s.frame[k]) < len(source)]
-    kinds = {"whole-pixel": 0, "resampled": 0, "morphed": 0}
-    for i in range(len(sp)):
-        a, b, alpha = int(sp.src[i]), int(sp.dst[i]), float(sp.alpha[i])
-        if alpha < 1.0 and a != b:
-            kinds["morphed"] += 1
-            continue
-        pose = plate.poses[plate.index(i, fps, anim.plate_line)]
-        kinds["whole-pixel" if whole_shift(compose(pose, s.affine[b]), (h, w)) is not None else "resampled"] += 1
     pm = _measures(list(plate.frames), plate.fps, mesh)
     # the frames the render's samples were cut from, as the reference measured them: a
     # render saying other words shows other mouths (closed ones have no teeth's edges), so
@@ -246,8 +236,7 @@ def _stages(anim, source, fps: float, mesh, ref: dict) -> dict:
             "shown samples' own frames' lips": round(float(np.nanmedian(shown) / np.nanmedian(lips)), 3)
             if shown else None,
             "plate cut": "none" if cut is None else ("whole-pixel" if cut[:2] == [1.0, 0.0] and cut[3:5] == [0.0, 1.0]
-                                                      and float(cut[2]).is_integer() else "resampled"),
-            **{f"frames {k}": round(v / max(len(sp), 1), 3) for k, v in kinds.items()}}
+                                                      and float(cut[2]).is_integer() else "resampled")}
 
 
 def _dubs(bank_dir: Path, clip: Path, tmp: Path, mesh, closures, ref: dict, methods=DUB_METHODS) -> Dict[str, dict]:

@@ -4,8 +4,8 @@ Footage of speech holds motion blur: a frame caught while the lips move fast is 
 its neighbours a frame later are crisp. Among samples that fit a rendered frame equally
 well, the crisp one is the better sample, so the selection charges a soft one
 (:data:`lipsync.selection.select.WEIGHTS` ``"blur"``). Sharpness is the variance of the
-Laplacian of the luma in the lips' box of the crop as stored, the measure
-:func:`lipsync.videobank.select.sharpness` uses for the bank's pictures. Parted lips show
+Laplacian of the luma in the lips' box of the crop as stored (:func:`sharpness`, the
+measure the bank's pictures are chosen by too). Parted lips show
 teeth and the dark gap, which add edges (GRID s1: r 0.59 between a crop's sharpness and its
 opening), so a sample is judged against the samples of its opening: :func:`softness` is
 how far its log sharpness falls below a straight-line fit of log sharpness on opening.
@@ -27,6 +27,8 @@ Examples
 
 from __future__ import annotations
 
+from typing import Tuple
+
 import cv2
 import numpy as np
 
@@ -36,6 +38,23 @@ MARGIN_PX = 2
 #: Added to the variance before its log: a flat crop (variance 0) stays finite, and
 #: differences among nearly flat crops (a dark or tiny mouth) do not read as blur.
 FLOOR = 1.0
+
+
+def sharpness(image: np.ndarray, box: Tuple[int, int, int, int]) -> float:
+    """Variance of the Laplacian of the luma in ``box`` (``x0, y0, x1, y1``): focus and motion
+    blur both lower it.
+
+    Examples
+    --------
+    >>> img = np.zeros((8, 8, 3), np.uint8); img[:, 4:] = 200
+    >>> sharpness(img, (0, 0, 8, 8)) > 0, sharpness(img, (0, 0, 4, 8)), sharpness(img, (2, 2, 2, 2))
+    (True, 0.0, 0.0)
+    """
+    x0, y0, x1, y1 = box
+    part = np.ascontiguousarray(image[y0:y1, x0:x1])
+    if not part.size:  # an empty box (a face at the frame's edge): OpenCV refuses empty input
+        return 0.0
+    return float(cv2.Laplacian(cv2.cvtColor(part, cv2.COLOR_RGB2GRAY), cv2.CV_64F).var())
 
 
 def lip_sharpness(samples) -> np.ndarray:
@@ -64,9 +83,9 @@ def lip_sharpness(samples) -> np.ndarray:
         p = lips[k] @ inv[:, :2].T + inv[:, 2]
         x0, y0 = np.floor(p.min(axis=0)).astype(int) - MARGIN_PX
         x1, y1 = np.ceil(p.max(axis=0)).astype(int) + MARGIN_PX + 1
-        box = crops[k, max(0, y0):min(h, y1), max(0, x0):min(w, x1)]
-        if box.shape[0] >= 3 and box.shape[1] >= 3:
-            out[k] = cv2.Laplacian(cv2.cvtColor(np.ascontiguousarray(box), cv2.COLOR_RGB2GRAY), cv2.CV_64F).var()
+        x0, y0, x1, y1 = max(0, x0), max(0, y0), min(w, x1), min(h, y1)
+        if y1 - y0 >= 3 and x1 - x0 >= 3:
+            out[k] = sharpness(crops[k], (x0, y0, x1, y1))
     return out
 
 

@@ -49,6 +49,7 @@ import numpy as np
 
 from ..face import measure as M
 from ..face import topology as T
+from ..samples.quality import sharpness  # the pictures' measure is the samples' (one definition)
 
 #: Share of a span left out at each end: its middle half is its steady part (a held sound
 #: reaches its shape within ~50-80 ms and leaves it as late before the next; GRID's
@@ -317,16 +318,6 @@ def with_sharpness(finalists: Sequence[Candidate], sharpness: Sequence[float]) -
     out = [replace(c, sharpness=float(s), score=c.score + SHARPNESS_WEIGHT * (1.0 - float(s) / top))
            for c, s in zip(finalists, sharpness)]
     return sorted(out, key=lambda c: c.score)
-
-
-def sharpness(image: np.ndarray, box: Tuple[int, int, int, int]) -> float:
-    """Variance of the Laplacian of the luma in ``box`` (``x0, y0, x1, y1``): focus and motion
-    blur both lower it."""
-    import cv2
-
-    x0, y0, x1, y1 = box
-    grey = cv2.cvtColor(np.ascontiguousarray(image[y0:y1, x0:x1]), cv2.COLOR_RGB2GRAY)
-    return float(cv2.Laplacian(grey, cv2.CV_64F).var()) if grey.size else 0.0
 
 
 def rhubarb_shape(viseme: str) -> Optional[str]:
